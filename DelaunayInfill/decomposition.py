@@ -1,0 +1,136 @@
+"""Concave-to-convex decomposition (the paper's layout, Section 2).
+
+A vertex p_i of a counter-clockwise ring is concave (reflex) when the cross
+product of P_{i-1}P_i and P_iP_{i+1} (the paper's Formula (3)) is negative.
+A polygon is split along diagonals at its reflex vertices until every piece
+is convex: diagonals between two reflex vertices first (each removes two),
+then diagonals that resolve the reflex angle, shortest first.  Holes are
+opened first by cutting along a line through each hole.  Every split makes
+both pieces smaller, so the process ends.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from shapely.geometry import LineString, Polygon
+from shapely.geometry.polygon import orient
+from shapely.ops import split
+
+from .geometry import as_area, polygons_of
+
+__all__ = ["cross_turn", "reflex_vertices", "is_convex", "decompose_convex"]
+
+_TOL = 1e-9
+
+
+def cross_turn(ring: np.ndarray) -> np.ndarray:
+    """The paper's Formula (3) at every vertex of a ring.
+
+    Parameters
+    ----------
+    ring : ndarray, shape (m, 2)
+        Vertices, not repeating the first at the end.
+
+    Returns
+    -------
+    ndarray, shape (m,)
+        (x_i - x_{i-1}) (y_{i+1} - y_i) - (x_{i+1} - x_i) (y_i - y_{i-1});
+        > 0 convex, = 0 collinear, < 0 concave for a counter-clockwise ring.
+    """
+    prev = np.roll(ring, 1, axis=0)
+    nxt = np.roll(ring, -1, axis=0)
+    return (ring[:, 0] - prev[:, 0]) * (nxt[:, 1] - ring[:, 1]) - (nxt[:, 0] - ring[:, 0]) * (ring[:, 1] - prev[:, 1])
+
+
+def _open_ring(polygon: Polygon) -> np.ndarray:
+    return np.asarray(polygon.exterior.coords, dtype=float)[:-1, :2]
+
+
+def reflex_vertices(polygon: Polygon) -> np.ndarray:
+    """The concave vertices of a polygon's exterior ring.
+
+    Returns
+    -------
+    ndarray, shape (k, 2)
+        Coordinates of the vertices where Formula (3) is negative once the
+        ring is counter-clockwise.
+    """
+    ring = _open_ring(orient(polygon, 1.0))
+    scale = max(1.0, float(np.ptp(ring, axis=0).max())) ** 2
+    return ring[cross_turn(ring) < -_TOL * scale]
+
+
+def is_convex(polygon: Polygon) -> bool:
+    """True for a polygon without holes and without concave vertices."""
+    return len(polygon.interiors) == 0 and len(reflex_vertices(polygon)) == 0
+
+
+def _split_pieces(polygon: Polygon, line: LineString) -> list[Polygon]:
+    pieces = [p for p in polygons_of(split(polygon, line)) if p.area > _TOL * max(polygon.area, 1.0)]
+    return pieces if len(pieces) >= 2 else []
+
+
+def _open_holes(polygon: Polygon) -> list[Polygon]:
+    """Cut a polygon with holes along a horizontal line through its first hole."""
+    hole = Polygon(polygon.interiors[0])
+    y = hole.representative_point().y
+    x0, _, x1, _ = polygon.bounds
+    pieces = _split_pieces(polygon, LineString([(x0 - 1.0, y), (x1 + 1.0, y)]))
+    if not pieces:
+        raise ValueError("could not open a hole of the region for convex decomposition")
+    return pieces
+
+
+def _best_diagonal(polygon: Polygon) -> LineString | None:
+    ring = _open_ring(polygon)
+    m = len(ring)
+    turn = cross_turn(ring)
+    scale = max(1.0, float(np.ptp(ring, axis=0).max())) ** 2
+    reflex = turn < -_TOL * scale
+    best = None
+    for v in np.flatnonzero(reflex):
+        a, b = ring[(v - 1) % m], ring[(v + 1) % m]
+        for u in range(m):
+            if u in (v, (v - 1) % m, (v + 1) % m):
+                continue
+            d = ring[u] - ring[v]
+            length = float(np.hypot(*d))
+            resolves = (b - ring[v])[0] * d[1] - (b - ring[v])[1] * d[0] >= 0 and d[0] * (a - ring[v])[1] - d[1] * (a - ring[v])[0] >= 0
+            score = (0 if reflex[u] else 1 if resolves else 2, length)
+            if best is not None and score >= best[0]:
+                continue
+            line = LineString([ring[v], ring[u]])
+            if polygon.contains(line):
+                best = (score, line)
+    return None if best is None else best[1]
+
+
+def decompose_convex(region) -> list[Polygon]:
+    """Split a region into convex polygons.
+
+    Parameters
+    ----------
+    region : shapely Polygon or MultiPolygon
+        Holes allowed.
+
+    Returns
+    -------
+    list of Polygon
+        Convex pieces covering the region exactly (no overlaps).
+    """
+    stack = [orient(p, 1.0) for p in polygons_of(as_area(region))]
+    out: list[Polygon] = []
+    while stack:
+        poly = stack.pop()
+        if poly.interiors:
+            stack.extend(orient(p, 1.0) for p in _open_holes(poly))
+            continue
+        if is_convex(poly):
+            out.append(poly)
+            continue
+        line = _best_diagonal(poly)
+        pieces = _split_pieces(poly, line) if line is not None else []
+        if not pieces:
+            raise ValueError("convex decomposition failed: no valid diagonal at a concave vertex")
+        stack.extend(orient(p, 1.0) for p in pieces)
+    return out

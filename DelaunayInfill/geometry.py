@@ -1,0 +1,155 @@
+"""Shapely 1.8 / 2.x compatibility and small geometry helpers.
+
+The engine runs on whatever shapely the host Cura bundles: 1.8.x (Cura 4.13 on
+Debian, Cura 5.1-5.4) or 2.0.x (Cura 5.5 and later).  Everything version
+specific lives here; the rest of the engine calls these functions only.
+shapely 2's vectorized functions are used when present.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+from shapely.geometry import GeometryCollection, LineString, MultiPolygon, Polygon, box
+from shapely.geometry.base import BaseGeometry
+from shapely.ops import unary_union
+from shapely.validation import make_valid
+
+SHAPELY2 = int(shapely.__version__.split(".")[0]) >= 2
+
+if not SHAPELY2:  # pragma: no cover - exercised on the shapely 1.8 CI leg
+    from shapely import vectorized as _vectorized
+
+__all__ = [
+    "SHAPELY2",
+    "as_area",
+    "contains_xy",
+    "empty_area",
+    "polygons_of",
+    "rings_of",
+    "to_multipolygon",
+    "unary_union",
+    "box",
+]
+
+
+def contains_xy(geometry: BaseGeometry, x, y) -> np.ndarray:
+    """Vectorized point-in-area test.
+
+    Parameters
+    ----------
+    geometry : shapely geometry
+        A (Multi)Polygon.
+    x, y : array_like, shape (n,)
+        Coordinates in mm.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        True where the point lies in the interior of `geometry`.
+    """
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if x.size == 0 or geometry.is_empty:
+        return np.zeros(x.shape, dtype=bool)
+    if SHAPELY2:
+        return np.asarray(shapely.contains_xy(geometry, x, y), dtype=bool)
+    return np.asarray(_vectorized.contains(geometry, x, y), dtype=bool)  # pragma: no cover
+
+
+def polygons_of(geometry: BaseGeometry | None) -> list[Polygon]:
+    """The non-empty polygons of any geometry (collections flattened)."""
+    if geometry is None or geometry.is_empty:
+        return []
+    if isinstance(geometry, Polygon):
+        return [geometry]
+    if isinstance(geometry, (MultiPolygon, GeometryCollection)):
+        out: list[Polygon] = []
+        for part in geometry.geoms:
+            out.extend(polygons_of(part))
+        return out
+    return []
+
+
+def to_multipolygon(geometry: BaseGeometry | None) -> MultiPolygon:
+    """The polygonal part of `geometry` as a MultiPolygon (possibly empty)."""
+    return MultiPolygon(polygons_of(geometry))
+
+
+def empty_area() -> MultiPolygon:
+    """An empty MultiPolygon."""
+    return MultiPolygon()
+
+
+def as_area(region, *, what: str = "region") -> MultiPolygon:
+    """Validate a user-supplied region and return it as a valid MultiPolygon.
+
+    Self-intersecting input is repaired with ``make_valid``; only the
+    polygonal part is kept.
+
+    Raises
+    ------
+    ValueError
+        If `region` is not polygonal, has NaN/inf coordinates, or has no area.
+    """
+    if not isinstance(region, BaseGeometry):
+        raise ValueError(f"{what} must be a shapely Polygon or MultiPolygon, got {type(region).__name__}")
+    if region.is_empty:
+        raise ValueError(f"{what} is empty")
+    if not isinstance(region, (Polygon, MultiPolygon, GeometryCollection)):
+        raise ValueError(f"{what} must be a Polygon or MultiPolygon, got {region.geom_type}")
+    coords = np.concatenate([r for p in polygons_of(region) for r in rings_of(p)] or [np.zeros((0, 2))])
+    if coords.size and not np.isfinite(coords).all():
+        raise ValueError(f"{what} has NaN or infinite coordinates")
+    if not region.is_valid:
+        region = make_valid(region)
+    area = to_multipolygon(region)
+    if area.is_empty or not (area.area > 1e-9):
+        raise ValueError(f"{what} has no area (degenerate polygon)")
+    return area
+
+
+def rings_of(polygon: Polygon) -> list[np.ndarray]:
+    """Exterior and interior rings of a polygon as (m, 2) arrays (closed)."""
+    rings = [np.asarray(polygon.exterior.coords, dtype=float)[:, :2]]
+    rings.extend(np.asarray(r.coords, dtype=float)[:, :2] for r in polygon.interiors)
+    return rings
+
+
+def boundary_segments(area: BaseGeometry) -> np.ndarray:
+    """All boundary edges of a (Multi)Polygon.
+
+    Returns
+    -------
+    ndarray, shape (k, 2, 2)
+        Segment start and end points in mm.
+    """
+    segs = []
+    for polygon in polygons_of(area):
+        for ring in rings_of(polygon):
+            if len(ring) >= 2:
+                segs.append(np.stack([ring[:-1], ring[1:]], axis=1))
+    if not segs:
+        return np.zeros((0, 2, 2))
+    return np.concatenate(segs)
+
+
+def linestrings(paths) -> list[LineString]:
+    """LineStrings from a sequence of (m, 2) arrays (vectorized on shapely 2)."""
+    if SHAPELY2:
+        return list(shapely.linestrings([np.asarray(p, dtype=float) for p in paths])) if len(paths) else []
+    return [LineString(p) for p in paths]  # pragma: no cover
+
+
+def polygon_area_signed(ring: np.ndarray) -> float:
+    """Signed area of a closed or open ring (shoelace); positive when CCW."""
+    x, y = ring[:, 0], ring[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def regular_polygon(center, radius: float, sides: int, start_angle: float = math.pi / 2) -> Polygon:
+    """A regular polygon (used for round density regions and test shapes)."""
+    a = start_angle + np.arange(sides) * 2 * math.pi / sides
+    return Polygon(np.c_[center[0] + radius * np.cos(a), center[1] + radius * np.sin(a)])

@@ -1,0 +1,268 @@
+"""Infill routing: clip segments to an area, chain them, order the chains.
+
+* `clip_segments` keeps the parts of segments inside an area (exact:
+  intersections with the boundary split segments, piece midpoints decide).
+* `chain_segments` joins segments into polylines through shared vertices.
+  At every vertex the incident segment ends are paired, opposite directions
+  first, so chains run as straight as the triangulation allows; a vertex of
+  odd degree leaves one end unpaired, where a chain must start or stop.  The
+  number of open chains therefore equals the lower bound (odd vertices / 2);
+  closed loops come on top.  Chains are read off by pointer jumping (list
+  ranking), without a Python loop over segments.
+* `order_paths` orders (and flips) chains greedily by nearest start to keep
+  travel short.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .geometry import boundary_segments, contains_xy
+
+__all__ = ["clip_segments", "chain_segments", "order_paths", "travel_length", "odd_vertex_count"]
+
+_EPS = 1e-9
+_QUANTUM = 1e-5  # mm: endpoints closer than this are one vertex
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _subdivide(segments: np.ndarray, max_length: float) -> np.ndarray:
+    """Split segments longer than `max_length` into equal pieces; shape (k', 2, 2)."""
+    length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
+    pieces = np.maximum(1, np.ceil(length / max_length)).astype(np.int64)
+    seg = np.repeat(np.arange(len(segments)), pieces)
+    first = np.repeat(np.cumsum(pieces) - pieces, pieces)
+    k = np.arange(len(seg)) - first
+    n = pieces[seg]
+    a, b = segments[seg, 0], segments[seg, 1]
+    t0 = (k / n)[:, None]
+    t1 = ((k + 1) / n)[:, None]
+    return np.stack([a + (b - a) * t0, a + (b - a) * t1], axis=1)
+
+
+def clip_segments(segments: np.ndarray, area) -> np.ndarray:
+    """The parts of `segments` that lie inside `area`.
+
+    Parameters
+    ----------
+    segments : ndarray, shape (k, 2, 2)
+        Start and end points, mm.
+    area : shapely (Multi)Polygon
+
+    Returns
+    -------
+    ndarray, shape (k', 2, 2)
+        Inside pieces, in input order; a segment crossing the boundary is cut
+        at the crossing points.
+    """
+    segments = np.asarray(segments, dtype=float).reshape(-1, 2, 2)
+    if len(segments) == 0 or area.is_empty:
+        return np.zeros((0, 2, 2))
+    boundary = boundary_segments(area)
+    length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
+    longest = float(length.max()) if len(length) else 0.0
+    ia = np.zeros(0, np.intp)
+    ta = np.zeros(0)
+    if len(boundary) and longest > 0:
+        boundary = _subdivide(boundary, max(longest, 1e-3))
+        blen = np.hypot(*(boundary[:, 1] - boundary[:, 0]).T)
+        reach = 0.5 * (longest + float(blen.max())) + 1e-6
+        sdm = cKDTree(segments.mean(axis=1)).sparse_distance_matrix(
+            cKDTree(boundary.mean(axis=1)), reach, output_type="ndarray"
+        )
+        ia, ib = sdm["i"].astype(np.intp), sdm["j"].astype(np.intp)
+        p, r = segments[ia, 0], segments[ia, 1] - segments[ia, 0]
+        q, s = boundary[ib, 0], boundary[ib, 1] - boundary[ib, 0]
+        denom = _cross(r, s)
+        ok = np.abs(denom) > 1e-15
+        safe = np.where(ok, denom, 1.0)
+        t = _cross(q - p, s) / safe
+        u = _cross(q - p, r) / safe
+        hit = ok & (t > _EPS) & (t < 1 - _EPS) & (u >= -_EPS) & (u <= 1 + _EPS)
+        ia, ta = ia[hit], t[hit]
+    k = len(segments)
+    seg_id = np.r_[np.arange(k), np.arange(k), ia]
+    param = np.r_[np.zeros(k), np.ones(k), ta]
+    order = np.lexsort((param, seg_id))
+    seg_id, param = seg_id[order], param[order]
+    same = seg_id[1:] == seg_id[:-1]
+    sid = seg_id[:-1][same]
+    t0, t1 = param[:-1][same], param[1:][same]
+    keep = (t1 - t0) * length[sid] > 1e-7
+    sid, t0, t1 = sid[keep], t0[keep], t1[keep]
+    a, b = segments[sid, 0], segments[sid, 1]
+    start = a + (b - a) * t0[:, None]
+    end = a + (b - a) * t1[:, None]
+    mid = 0.5 * (start + end)
+    inside = contains_xy(area, mid[:, 0], mid[:, 1])
+    return np.stack([start[inside], end[inside]], axis=1)
+
+
+def _vertex_ids(points: np.ndarray) -> tuple[np.ndarray, int]:
+    """Ids of coincident points (within _QUANTUM); returns (ids, count)."""
+    q = np.round(points / _QUANTUM).astype(np.int64)
+    key = q[:, 0] * (1 << 32) + (q[:, 1] + (1 << 31))
+    _, ids = np.unique(key, return_inverse=True)
+    ids = ids.ravel()
+    return ids, int(ids.max()) + 1 if ids.size else 0
+
+
+def odd_vertex_count(segments: np.ndarray) -> int:
+    """Number of vertices of odd degree in the segment graph."""
+    segments = np.asarray(segments, dtype=float).reshape(-1, 2, 2)
+    if len(segments) == 0:
+        return 0
+    ids, n = _vertex_ids(segments.reshape(-1, 2))
+    return int(np.count_nonzero(np.bincount(ids, minlength=n) % 2))
+
+
+def _rank(nxt: np.ndarray):
+    """Pointer jumping: for each node, the last node of its chain and the steps to it."""
+    n = len(nxt)
+    idx = np.arange(n)
+    ptr = np.where(nxt >= 0, nxt, idx)
+    dist = (nxt >= 0).astype(np.int64)
+    for _ in range(max(1, math.ceil(math.log2(max(n, 2)))) + 1):
+        dist = dist + dist[ptr]
+        ptr = ptr[ptr]
+    return ptr, dist
+
+
+def chain_segments(segments: np.ndarray) -> list[np.ndarray]:
+    """Join segments into polylines through shared vertices.
+
+    Parameters
+    ----------
+    segments : ndarray, shape (k, 2, 2)
+
+    Returns
+    -------
+    list of ndarray, each shape (m, 2)
+        Polylines using every segment exactly once; a closed loop repeats its
+        first point at the end.
+    """
+    segments = np.asarray(segments, dtype=float).reshape(-1, 2, 2)
+    k = len(segments)
+    if k == 0:
+        return []
+    ends = segments.reshape(-1, 2)  # end e = 2*segment + side
+    vid, _ = _vertex_ids(ends)
+    other = ends[np.arange(2 * k) ^ 1]
+    angle = np.arctan2(other[:, 1] - ends[:, 1], other[:, 0] - ends[:, 0])
+    # Pair the ends at each vertex: sorted by direction, end p with end p + d/2
+    # (the most opposite direction); an odd vertex leaves its last end free.
+    order = np.lexsort((angle, vid))
+    svid = vid[order]
+    start = np.flatnonzero(np.r_[True, svid[1:] != svid[:-1]])
+    size = np.diff(np.r_[start, 2 * k])
+    group = np.repeat(np.arange(len(start)), size)
+    pos = np.arange(2 * k) - start[group]
+    half = (size // 2)[group]
+    a = np.flatnonzero(pos < half)
+    b = a + half[a]
+    partner = np.full(2 * k, -1, dtype=np.int64)
+    partner[order[a]] = order[b]
+    partner[order[b]] = order[a]
+
+    # Walking a chain: enter segment at end e, leave at e ^ 1, continue into
+    # the end paired with e ^ 1.
+    nxt = partner[np.arange(2 * k) ^ 1]
+    ptr, _ = _rank(nxt)
+    in_loop = nxt[ptr] >= 0
+    starts = []
+    if in_loop.any():
+        # A loop is seen in both directions; keep the one holding the smaller
+        # end index and open it there.
+        label = np.where(in_loop, np.arange(2 * k), 2 * k)
+        jump = np.where(in_loop, nxt, np.arange(2 * k))
+        for _ in range(max(1, math.ceil(math.log2(2 * k))) + 1):
+            label = np.minimum(label, label[jump])
+            jump = jump[jump]
+        mirror = label[np.arange(2 * k) ^ 1]
+        kept = in_loop & (label < mirror)
+        closing = np.flatnonzero(kept & (nxt == label))  # the end that leads back to the start
+        nxt = nxt.copy()
+        nxt[closing] = -1
+        starts.append(np.flatnonzero(kept & (label == np.arange(2 * k))))
+    free = np.flatnonzero(partner < 0)
+    ptr, dist = _rank(nxt)
+    # An open chain has a free end at each side; keep one direction.
+    free = free[free < (ptr[free] ^ 1)]
+    starts.insert(0, free)
+    starts = np.concatenate(starts)
+    terminal = ptr[starts]
+    chain_of = np.full(2 * k, -1, dtype=np.int64)
+    chain_of[terminal] = np.arange(len(starts))
+    member = np.flatnonzero(chain_of[ptr] >= 0)
+    chain = chain_of[ptr[member]]
+    member = member[np.lexsort((-dist[member], chain))]
+    chain = chain_of[ptr[member]]
+    # Polyline of a chain: the entry point of its first segment, then the exit
+    # point of every segment.
+    cuts = np.flatnonzero(np.r_[True, chain[1:] != chain[:-1]])
+    exits = ends[member ^ 1]
+    first_entry = ends[member[cuts]]
+    counts = np.diff(np.r_[cuts, len(member)])
+    points = np.insert(exits, cuts, first_entry, axis=0)
+    bounds = np.cumsum(counts + 1)[:-1]
+    return np.split(points, bounds)
+
+
+def order_paths(paths: list[np.ndarray], start=None) -> tuple[list[np.ndarray], float]:
+    """Order and orient paths greedily to keep travel between them short.
+
+    Parameters
+    ----------
+    paths : list of ndarray, each shape (m, 2)
+    start : (x, y), optional
+        Where the nozzle is before the first path.
+
+    Returns
+    -------
+    (paths, travel_mm)
+        Reordered (and possibly reversed) paths, and the straight-line travel
+        between consecutive paths (from `start` when given).
+    """
+    n = len(paths)
+    if n == 0:
+        return [], 0.0
+    heads = np.array([p[0] for p in paths])
+    tails = np.array([p[-1] for p in paths])
+    here = np.asarray(start, dtype=float) if start is not None else heads[0]
+    alive = np.arange(n)
+    out: list[np.ndarray] = []
+    travel = 0.0
+    for _ in range(n):
+        dh = np.hypot(*(heads[alive] - here).T)
+        dt = np.hypot(*(tails[alive] - here).T)
+        jh, jt = int(np.argmin(dh)), int(np.argmin(dt))
+        if dt[jt] < dh[jh]:
+            j, flip, d = jt, True, dt[jt]
+        else:
+            j, flip, d = jh, False, dh[jh]
+        idx = alive[j]
+        path = paths[idx][::-1] if flip else paths[idx]
+        if out or start is not None:
+            travel += float(d)
+        out.append(path)
+        here = path[-1]
+        alive = np.delete(alive, j)
+    return out, travel
+
+
+def travel_length(paths: list[np.ndarray], start=None) -> float:
+    """Straight-line travel between consecutive paths (from `start` if given), mm."""
+    if not paths:
+        return 0.0
+    heads = np.array([p[0] for p in paths])
+    tails = np.array([p[-1] for p in paths])
+    total = float(np.hypot(*(heads[1:] - tails[:-1]).T).sum())
+    if start is not None:
+        total += float(np.hypot(*(heads[0] - np.asarray(start, dtype=float))))
+    return total

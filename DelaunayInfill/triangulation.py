@@ -1,0 +1,202 @@
+"""Delaunay triangulation, the paper's LOP criterion, angle statistics, relaxation.
+
+The triangulation is qhull's (``scipy.spatial.Delaunay``).  The paper's
+Local Optimization Procedure (Lawson) flips an interior edge when the two
+angles opposite it sum to more than 180 degrees; `lop_violations` counts such
+edges, so a triangulation that satisfies the criterion has none.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import Delaunay, QhullError, cKDTree
+
+from .geometry import contains_xy
+
+__all__ = [
+    "delaunay_triangles",
+    "unique_edges",
+    "lop_violations",
+    "triangle_angles",
+    "edge_length_stats",
+    "relax_points",
+]
+
+
+def delaunay_triangles(points: np.ndarray) -> np.ndarray:
+    """Delaunay triangles of a point set.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 2)
+
+    Returns
+    -------
+    ndarray of int, shape (t, 3)
+        Vertex indices, counter-clockwise; empty when fewer than 3
+        non-collinear points.
+    """
+    points = np.asarray(points, dtype=float)
+    if len(points) < 3:
+        return np.zeros((0, 3), dtype=np.intp)
+    try:
+        tri = Delaunay(points)
+    except (QhullError, ValueError):  # all points collinear or coincident
+        return np.zeros((0, 3), dtype=np.intp)
+    simplices = tri.simplices.astype(np.intp)
+    a, b, c = (points[simplices[:, k]] for k in range(3))
+    cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    flip = cross < 0
+    simplices[flip] = simplices[flip][:, [0, 2, 1]]
+    return simplices
+
+
+def unique_edges(triangles: np.ndarray) -> np.ndarray:
+    """Edges of a triangle mesh, each once.
+
+    Parameters
+    ----------
+    triangles : ndarray of int, shape (t, 3)
+
+    Returns
+    -------
+    ndarray of int, shape (e, 2)
+        Vertex index pairs with ``e[:, 0] < e[:, 1]``.
+    """
+    if len(triangles) == 0:
+        return np.zeros((0, 2), dtype=np.intp)
+    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    e.sort(axis=1)
+    return np.unique(e, axis=0)
+
+
+def _interior_edge_opposites(triangles: np.ndarray):
+    """For each interior edge: its two opposite vertices and its endpoints.
+
+    Returns
+    -------
+    (p, q, u, v) : ndarrays of int, shape (m,)
+        Edge (u, v) is shared by triangles (u, v, p) and (v, u, q).
+    """
+    t = len(triangles)
+    # Half-edges k -> k+1 with the opposite vertex k+2.
+    u = triangles.ravel()
+    v = np.roll(triangles, -1, axis=1).ravel()
+    w = np.roll(triangles, -2, axis=1).ravel()
+    lo, hi = np.minimum(u, v), np.maximum(u, v)
+    key = lo.astype(np.int64) * (triangles.max() + 1 if t else 1) + hi
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    pair = np.flatnonzero(ks[1:] == ks[:-1])
+    first, second = order[pair], order[pair + 1]
+    return w[first], w[second], lo[first], hi[first]
+
+
+def lop_violations(points: np.ndarray, triangles: np.ndarray, tol_deg: float = 1e-7) -> int:
+    """Number of interior edges that break the paper's LOP criterion.
+
+    An interior edge shared by triangles ABC and ABD satisfies the criterion
+    when the opposite angles C and D sum to at most 180 degrees
+    (sin(C + D) >= 0 in the paper's notation, i.e. D not inside the
+    circumcircle of ABC).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 2)
+    triangles : ndarray of int, shape (t, 3)
+    tol_deg : float
+        Slack for cocircular points, degrees.
+
+    Returns
+    -------
+    int
+    """
+    if len(triangles) < 2:
+        return 0
+    p, q, u, v = _interior_edge_opposites(np.asarray(triangles))
+    pts = np.asarray(points, dtype=float)
+
+    def angle_at(c):
+        a, b = pts[u] - pts[c], pts[v] - pts[c]
+        cos = (a * b).sum(1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+        return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+    return int(np.count_nonzero(angle_at(p) + angle_at(q) > 180.0 + tol_deg))
+
+
+def triangle_angles(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Interior angles of each triangle.
+
+    Returns
+    -------
+    ndarray, shape (t, 3)
+        Degrees, the angle at each vertex of each triangle.
+    """
+    pts = np.asarray(points, dtype=float)
+    a, b, c = (pts[triangles[:, k]] for k in range(3))
+
+    def ang(o, x, y):
+        d1, d2 = x - o, y - o
+        cos = (d1 * d2).sum(1) / (np.linalg.norm(d1, axis=1) * np.linalg.norm(d2, axis=1))
+        return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+    return np.stack([ang(a, b, c), ang(b, c, a), ang(c, a, b)], axis=1)
+
+
+def edge_length_stats(segments: np.ndarray) -> dict:
+    """Mean edge length and the share of edges shorter than half the mean.
+
+    Parameters
+    ----------
+    segments : ndarray, shape (k, 2, 2)
+
+    Returns
+    -------
+    dict with ``mean_mm`` and ``short_share`` (fraction of edges < mean / 2).
+    """
+    if len(segments) == 0:
+        return {"mean_mm": float("nan"), "short_share": float("nan")}
+    length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
+    mean = float(length.mean())
+    return {"mean_mm": mean, "short_share": float(np.mean(length < 0.5 * mean))}
+
+
+def relax_points(points: np.ndarray, area, radius_fn, steps: int, *, seed: int = 0) -> np.ndarray:
+    """Lloyd relaxation towards a centroidal Voronoi tessellation.
+
+    Monte-Carlo Lloyd: each step assigns many random points of `area` to
+    their nearest sample and moves every sample to the weighted centroid of
+    its points.  The weight 1 / r(x)^4 keeps the local point density
+    proportional to 1 / r(x)^2, so variable density survives relaxation.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 2)
+    area : shapely (Multi)Polygon
+        Samples stay inside it.
+    radius_fn : callable (m, 2) -> (m,)
+    steps : int
+    seed : int
+
+    Returns
+    -------
+    ndarray, shape (n, 2)
+    """
+    pts = np.asarray(points, dtype=float).copy()
+    if steps <= 0 or len(pts) < 3:
+        return pts
+    rng = np.random.default_rng(seed + 7_777)
+    x0, y0, x1, y1 = area.bounds
+    per_point = 96  # probe points per sample: Monte-Carlo noise stays well below r
+    for _ in range(steps):
+        m = per_point * len(pts)
+        probe = np.c_[rng.uniform(x0, x1, 2 * m), rng.uniform(y0, y1, 2 * m)]
+        probe = probe[contains_xy(area, probe[:, 0], probe[:, 1])][:m]
+        weight = radius_fn(probe) ** -4.0
+        _, owner = cKDTree(pts).query(probe, k=1)
+        mass = np.bincount(owner, weight, minlength=len(pts))
+        cx = np.bincount(owner, weight * probe[:, 0], minlength=len(pts))
+        cy = np.bincount(owner, weight * probe[:, 1], minlength=len(pts))
+        moved = mass > 0
+        pts[moved] = np.c_[cx[moved] / mass[moved], cy[moved] / mass[moved]]
+    return pts

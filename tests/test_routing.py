@@ -1,0 +1,88 @@
+"""Clipping, chaining and ordering of infill segments."""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import LineString, MultiLineString, Point, box
+from shapes import annulus, star
+
+from DelaunayInfill.geometry import contains_xy
+from DelaunayInfill.routing import chain_segments, clip_segments, odd_vertex_count, order_paths, travel_length
+from DelaunayInfill.sampling import sample_poisson_disk
+from DelaunayInfill.triangulation import delaunay_triangles, unique_edges
+
+
+def mesh_segments(area, r, seed=0):
+    pts = sample_poisson_disk(area.buffer(r), r, seed=seed)
+    return pts[unique_edges(delaunay_triangles(pts))]
+
+
+def total_length(segments):
+    return float(np.hypot(*(segments[:, 1] - segments[:, 0]).T).sum())
+
+
+def test_clip_matches_shapely_intersection_length():
+    for region in (star(), annulus(), box(0, 0, 30, 20).difference(Point(15, 10).buffer(5))):
+        segs = mesh_segments(region, 2.0)
+        clipped = clip_segments(segs, region)
+        reference = region.intersection(MultiLineString([s.tolist() for s in segs])).length
+        assert abs(total_length(clipped) - reference) < 1e-6 * reference
+        mid = clipped.mean(axis=1)
+        assert contains_xy(region, mid[:, 0], mid[:, 1]).all()
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000))
+def test_clip_of_random_segments_against_shapely(seed):
+    rng = np.random.default_rng(seed)
+    segs = rng.uniform(-40, 40, (60, 2, 2))
+    region = star()
+    clipped = clip_segments(segs, region)
+    reference = sum(region.intersection(LineString(s)).length for s in segs)
+    assert abs(total_length(clipped) - reference) < 1e-6 * max(reference, 1.0)
+
+
+def test_chains_use_every_segment_once_and_meet_the_lower_bound():
+    region = annulus()
+    segs = clip_segments(mesh_segments(region, 2.5, seed=3), region)
+    paths = chain_segments(segs)
+    used = np.concatenate([np.stack([p[:-1], p[1:]], axis=1) for p in paths])
+    assert len(used) == len(segs)
+    key = lambda s: tuple(sorted((tuple(np.round(s[0], 6)), tuple(np.round(s[1], 6)))))  # noqa: E731
+    assert sorted(map(key, used)) == sorted(map(key, segs))
+    open_paths = [p for p in paths if not np.allclose(p[0], p[-1])]
+    assert len(open_paths) == odd_vertex_count(segs) // 2
+
+
+def test_closed_loops_become_closed_paths():
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    segs = np.stack([square, np.roll(square, -1, axis=0)], axis=1)
+    paths = chain_segments(segs)
+    assert len(paths) == 1 and len(paths[0]) == 5
+    np.testing.assert_allclose(paths[0][0], paths[0][-1])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 6), st.integers(0, 6)), min_size=1, max_size=40))
+def test_chain_any_graph_covers_all_edges(edges):
+    coords = np.array([[np.cos(k), np.sin(k)] for k in range(7)]) * 10
+    edges = [(a, b) for a, b in edges if a != b]
+    if not edges:
+        return
+    segs = np.array([[coords[a], coords[b]] for a, b in edges])
+    paths = chain_segments(segs)
+    assert sum(len(p) - 1 for p in paths) == len(segs)
+    open_paths = [p for p in paths if not np.allclose(p[0], p[-1])]
+    assert len(open_paths) == odd_vertex_count(segs) // 2
+
+
+def test_order_paths_beats_input_order_on_travel():
+    region = star()
+    segs = clip_segments(mesh_segments(region, 2.0, seed=1), region)
+    paths = chain_segments(segs)
+    rng = np.random.default_rng(0)
+    shuffled = [paths[k] for k in rng.permutation(len(paths))]
+    ordered, travel = order_paths(shuffled, start=(0.0, 0.0))
+    assert abs(travel - travel_length(ordered, start=(0.0, 0.0))) < 1e-6
+    assert travel < 0.5 * travel_length(shuffled, start=(0.0, 0.0))
+    assert abs(sum(LineString(p).length for p in ordered) - sum(LineString(p).length for p in paths)) < 1e-9

@@ -1,0 +1,138 @@
+"""Poisson-disk sampling: minimum distance, maximality, variable radius, determinism."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial import cKDTree
+from shapely.geometry import Point, Polygon, box
+from shapes import annulus, star
+
+from DelaunayInfill import sample_poisson_disk
+from DelaunayInfill.geometry import contains_xy
+from DelaunayInfill.sampling import close_pairs, greedy_independent_set, uncovered_fraction
+
+METHODS = ["fast", "bridson"]
+
+
+def min_pair_distance(points):
+    d, _ = cKDTree(points).query(points, k=2)
+    return d[:, 1].min()
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("shape", [lambda: box(0, 0, 60, 40), star, annulus])
+def test_uniform_radius_is_poisson_and_maximal(method, shape):
+    region = shape()
+    r = 2.5
+    pts = sample_poisson_disk(region, r, seed=4, method=method)
+    assert len(pts) > 50
+    assert contains_xy(region.buffer(1e-9), pts[:, 0], pts[:, 1]).all()
+    assert min_pair_distance(pts) >= r * (1 - 1e-9)
+    assert uncovered_fraction(region, pts, r) <= 0.01
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_variable_radius_respects_local_radius_and_is_maximal(method):
+    region = box(0, 0, 60, 30)
+
+    def radius(xy):
+        return np.where(xy[:, 0] < 30, 1.5, 4.0)
+
+    pts = sample_poisson_disk(region, radius, seed=2, method=method)
+    i, j = close_pairs(pts, radius(pts))
+    assert i.size == 0, "two samples closer than the larger of their radii"
+    assert uncovered_fraction(region, pts, radius) <= 0.01
+    left = np.count_nonzero(pts[:, 0] < 30)
+    right = len(pts) - left
+    # point density scales with 1 / r^2: (4 / 1.5)^2 = 7.1
+    assert 5.0 < left / right < 9.5
+
+
+def test_fast_sampler_covers_better_than_scipy_poisson_disk():
+    from scipy.stats import qmc
+
+    region = box(0, 0, 100, 100)
+    ours = sample_poisson_disk(region, 3.3, seed=1)
+    theirs = qmc.PoissonDisk(2, radius=0.033, seed=1).fill_space() * 100
+    assert uncovered_fraction(region, ours, 3.3) <= uncovered_fraction(region, theirs, 3.3)
+
+
+def test_same_seed_same_samples_other_seed_other_samples():
+    a = sample_poisson_disk(star(), 2.0, seed=7)
+    b = sample_poisson_disk(star(), 2.0, seed=7)
+    c = sample_poisson_disk(star(), 2.0, seed=8)
+    np.testing.assert_array_equal(a, b)
+    assert a.shape != c.shape or not np.array_equal(a, c)
+
+
+def test_pattern_is_local_a_larger_region_keeps_the_interior():
+    """Hashed candidates: growing the region changes the samples only near its border."""
+    small = sample_poisson_disk(box(0, 0, 40, 40), 2.0, seed=3)
+    large = sample_poisson_disk(box(-20, -20, 60, 60), 2.0, seed=3)
+    core = small[(np.abs(small - 20) < 12).all(axis=1)]
+    d, _ = cKDTree(large).query(core)
+    assert np.mean(d < 1e-9) > 0.9
+
+
+def test_multipolygon_and_holes_are_filled_everywhere():
+    region = Point(0, 0).buffer(10).union(Point(40, 0).buffer(6)).difference(Point(0, 0).buffer(3))
+    for method in METHODS:
+        pts = sample_poisson_disk(region, 1.5, seed=0, method=method)
+        assert uncovered_fraction(region, pts, 1.5) <= 0.01
+        assert not contains_xy(Point(0, 0).buffer(3 - 1e-6), pts[:, 0], pts[:, 1]).any()
+
+
+@pytest.mark.parametrize(
+    "region, radius, message",
+    [
+        (Polygon(), 1.0, "empty"),
+        (Polygon([(0, 0), (1, 1), (2, 2)]), 1.0, "no area"),
+        (box(0, 0, 10, 10), 0.0, "radius"),
+        (box(0, 0, 10, 10), -1.0, "radius"),
+        (box(0, 0, 10, 10), float("nan"), "radius"),
+        (Polygon([(0, 0), (float("nan"), 1), (2, 0)]), 1.0, "NaN"),
+        ("not a polygon", 1.0, "Polygon"),
+    ],
+)
+def test_bad_input_raises_clear_value_error(region, radius, message):
+    with pytest.raises(ValueError, match=message):
+        sample_poisson_disk(region, radius)
+
+
+def test_unknown_method_and_bad_radius_function():
+    with pytest.raises(ValueError, match="method"):
+        sample_poisson_disk(box(0, 0, 5, 5), 1.0, method="magic")
+    with pytest.raises(ValueError, match="radius function"):
+        sample_poisson_disk(box(0, 0, 5, 5), lambda xy: -np.ones(len(xy)))
+
+
+def test_self_intersecting_region_is_repaired():
+    bowtie = Polygon([(0, 0), (20, 20), (20, 0), (0, 20)])
+    pts = sample_poisson_disk(bowtie, 1.0)
+    assert len(pts) > 20
+    assert uncovered_fraction(bowtie, pts, 1.0) <= 0.01
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(2, 60), st.integers(0, 10_000))
+def test_greedy_independent_set_is_independent_and_maximal(n, seed):
+    rng = np.random.default_rng(seed)
+    a = rng.integers(0, n, 3 * n)
+    b = rng.integers(0, n, 3 * n)
+    keep = a != b
+    a, b = a[keep], b[keep]
+    priority = rng.permutation(n).astype(float)
+    chosen = greedy_independent_set(n, a, b, priority)
+    assert not (chosen[a] & chosen[b]).any()
+    covered = chosen.copy()
+    covered[b[chosen[a]]] = True
+    covered[a[chosen[b]]] = True
+    assert covered.all()
+    # equals the sequential greedy in priority order
+    seq = np.zeros(n, bool)
+    for v in np.argsort(priority):
+        nbrs = np.r_[b[a == v], a[b == v]]
+        if not seq[nbrs].any():
+            seq[v] = True
+    np.testing.assert_array_equal(chosen, seq)

@@ -1,0 +1,76 @@
+"""Delaunay triangulation, the paper's LOP criterion, angles, relaxation."""
+
+import numpy as np
+from shapely.geometry import box
+
+from DelaunayInfill import InfillPattern, sample_poisson_disk
+from DelaunayInfill.triangulation import (
+    delaunay_triangles,
+    lop_violations,
+    relax_points,
+    triangle_angles,
+    unique_edges,
+)
+
+
+def test_lop_counts_zero_on_delaunay_and_flags_a_flipped_edge():
+    pts = sample_poisson_disk(box(0, 0, 40, 40), 2.0, seed=1)
+    tri = delaunay_triangles(pts)
+    assert lop_violations(pts, tri) == 0
+    # A convex quadrilateral split along its longer diagonal breaks the criterion.
+    quad = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 1.0], [0.0, 1.0]])
+    good = np.array([[0, 1, 2], [0, 2, 3]])
+    assert lop_violations(quad, good) == 0
+    kite = np.array([[0.0, 0.0], [4.0, -1.0], [8.0, 0.0], [4.0, 1.0]])
+    bad = np.array([[0, 1, 3], [1, 2, 3]])  # diagonal 1-3 is short; opposite angles at 0 and 2 are wide
+    good_kite = np.array([[0, 1, 2], [0, 2, 3]])
+    assert lop_violations(kite, bad) == 0 or lop_violations(kite, good_kite) == 1
+    assert lop_violations(kite, good_kite) + lop_violations(kite, bad) == 1
+
+
+def test_triangles_are_counter_clockwise_and_edges_unique():
+    pts = np.random.default_rng(0).uniform(0, 10, (200, 2))
+    tri = delaunay_triangles(pts)
+    a, b, c = (pts[tri[:, k]] for k in range(3))
+    cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    assert (cross > 0).all()
+    edges = unique_edges(tri)
+    assert len(edges) == len({tuple(e) for e in edges})
+    # Euler: E = V + T - 1 for a triangulated convex hull
+    assert len(edges) == len(pts) + len(tri) - 1
+
+
+def test_degenerate_inputs_give_no_triangles():
+    assert delaunay_triangles(np.zeros((2, 2))).shape == (0, 3)
+    assert delaunay_triangles(np.c_[np.arange(5.0), np.arange(5.0)]).shape == (0, 3)
+
+
+def test_angles_sum_to_180():
+    pts = np.random.default_rng(1).uniform(0, 10, (50, 2))
+    tri = delaunay_triangles(pts)
+    np.testing.assert_allclose(triangle_angles(pts, tri).sum(axis=1), 180.0, atol=1e-6)
+
+
+def test_maximal_uniform_samples_meet_the_30_degree_bar():
+    pattern = InfillPattern.build(box(0, 0, 80, 80), 0.25, 0.4, seed=3)
+    q = pattern.quality()
+    assert q["lop_violations"] == 0
+    assert q["min_angle_deg"] >= 30.0
+
+
+def test_relaxation_makes_triangles_more_regular_and_keeps_density():
+    plain = InfillPattern.build(box(0, 0, 100, 100), 0.2, 0.4, seed=5)
+    relaxed = InfillPattern.build(box(0, 0, 100, 100), 0.2, 0.4, seed=5, relax=8)
+    qp, qr = plain.quality(), relaxed.quality()
+    assert qr["lop_violations"] == 0
+    assert qr["mean_min_angle_deg"] > qp["mean_min_angle_deg"] + 2.0
+    assert qr["sharp_triangle_share"] < 0.5 * qp["sharp_triangle_share"]
+    assert abs(relaxed.calibrated_densities[0] - 0.2) <= 0.015
+
+
+def test_relax_points_keeps_points_near_their_area_and_count():
+    area = box(0, 0, 30, 30)
+    pts = sample_poisson_disk(area, 2.0, seed=0)
+    moved = relax_points(pts, area, lambda xy: np.full(len(xy), 2.0), 3)
+    assert moved.shape == pts.shape
+    assert (moved >= -1e-9).all() and (moved <= 30 + 1e-9).all()

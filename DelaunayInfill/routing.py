@@ -232,27 +232,23 @@ def order_paths(paths: list[np.ndarray], start=None) -> tuple[list[np.ndarray], 
     n = len(paths)
     if n == 0:
         return [], 0.0
-    heads = np.array([p[0] for p in paths])
-    tails = np.array([p[-1] for p in paths])
-    here = np.asarray(start, dtype=float) if start is not None else heads[0]
-    alive = np.arange(n)
+    # Row j < n is the head of path j, row n + j its tail; a printed path's
+    # ends move to infinity.
+    ends = np.concatenate([[p[0] for p in paths], [p[-1] for p in paths]])
+    x, y = ends[:, 0].copy(), ends[:, 1].copy()
+    here = np.asarray(start, dtype=float) if start is not None else ends[0]
     out: list[np.ndarray] = []
     travel = 0.0
     for _ in range(n):
-        dh = np.hypot(*(heads[alive] - here).T)
-        dt = np.hypot(*(tails[alive] - here).T)
-        jh, jt = int(np.argmin(dh)), int(np.argmin(dt))
-        if dt[jt] < dh[jh]:
-            j, flip, d = jt, True, dt[jt]
-        else:
-            j, flip, d = jh, False, dh[jh]
-        idx = alive[j]
-        path = paths[idx][::-1] if flip else paths[idx]
+        d2 = (x - here[0]) ** 2 + (y - here[1]) ** 2
+        j = int(d2.argmin())
+        i = j % n
         if out or start is not None:
-            travel += float(d)
+            travel += math.sqrt(float(d2[j]))
+        x[i] = x[i + n] = np.inf
+        path = paths[i][::-1] if j >= n else paths[i]
         out.append(path)
         here = path[-1]
-        alive = np.delete(alive, j)
     return out, travel
 
 

@@ -287,13 +287,14 @@ def _fill_gaps(area, samples, samples_r, radius_fn, uniform: bool, passes: int =
     """
     from scipy.spatial import Delaunay, QhullError
 
+    if len(samples) < 3:
+        return samples
+    try:
+        triangulation = Delaunay(samples, incremental=True)
+    except (QhullError, ValueError):
+        return samples
     for _ in range(passes):
-        if len(samples) < 3:
-            break
-        try:
-            tri = Delaunay(samples).simplices
-        except (QhullError, ValueError):
-            break
+        tri = triangulation.simplices
         a, b, c = (samples[tri[:, k]] for k in range(3))
         d = 2.0 * (a[:, 0] * (b[:, 1] - c[:, 1]) + b[:, 0] * (c[:, 1] - a[:, 1]) + c[:, 0] * (a[:, 1] - b[:, 1]))
         ok = np.abs(d) > 1e-12
@@ -304,8 +305,9 @@ def _fill_gaps(area, samples, samples_r, radius_fn, uniform: bool, passes: int =
             (sa * (c[:, 0] - b[:, 0]) + sb * (a[:, 0] - c[:, 0]) + sc * (b[:, 0] - a[:, 0])) / d,
         ]
         radius = np.hypot(*(center - a).T)
-        center = center[ok]
-        radius = radius[ok]
+        # Only circles wider than the smallest radius can be gaps.
+        wide = ok & (radius > samples_r.min() * (1 + 1e-9))
+        center, radius = center[wide], radius[wide]
         inside = contains_xy(area, center[:, 0], center[:, 1])
         center, radius = center[inside], radius[inside]
         if len(center) == 0:
@@ -320,6 +322,8 @@ def _fill_gaps(area, samples, samples_r, radius_fn, uniform: bool, passes: int =
         won = _independent_candidates(center, rc, np.arange(len(center), dtype=float), uniform)
         samples = np.r_[samples, center[won]]
         samples_r = np.r_[samples_r, rc[won]]
+        triangulation.add_points(center[won])
+    triangulation.close()
     return samples
 
 

@@ -7,7 +7,7 @@
 * ``figure10.png``: the five-point star split into five tips and the central
   pentagon at 30/30/20/50/50/10 %, in the paper's layout and in the seamless
   layout;
-* ``figures.md``: the measured density per region, the paper's Formula (6)
+* ``figures.md`` (or ``--table PATH``): the measured density per region, the paper's Formula (6)
   calibration error next to ours, and triangle quality with and without
   relaxation.
 
@@ -172,14 +172,18 @@ def quality_rows(seed: int = 0) -> list[dict]:
     return rows
 
 
-def write_figures(out_dir: Path, seed: int = 0) -> str:
-    """Write the figures and figures.md into `out_dir`; returns the markdown."""
+def write_figures(out_dir: Path, seed: int = 0, table: Path | None = None) -> str:
+    """Write the figures into `out_dir` and the tables to `table` (default out_dir/figures.md).
+
+    Returns the markdown.
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
     f2 = figure2(out_dir / "figure2.png", seed=seed)
     f10 = figure10(out_dir / "figure10.png", seed=seed)
     cal = calibration_rows(seed=seed)
     qual = quality_rows(seed=seed)
-    lines = ["# Figures and measured densities", "", "Printed by `delaunay-infill figures -o docs/images`.", ""]
+    lines = ["# Figures and measured densities", "",
+             "Printed by `delaunay-infill figures -o docs/images --table docs/figures.md`.", ""]
     lines += ["## Figure 2: 400 x 400 mm square, 1.2 mm lines", "",
               "| target | measured (ours) | measured with Formula (6) | samples | seconds |", "|---|---|---|---|---|"]
     lines += [f"| {r['target']:.0%} | {r['ours']:.2%} | {r['paper']:.2%} | {r['samples']} | {r['seconds']:.2f} |" for r in f2]
@@ -205,7 +209,9 @@ def write_figures(out_dir: Path, seed: int = 0) -> str:
         for r in qual
     ]
     text = "\n".join(lines) + "\n"
-    (out_dir / "figures.md").write_text(text, encoding="utf-8")
+    table = table or out_dir / "figures.md"
+    table.parent.mkdir(parents=True, exist_ok=True)
+    table.write_text(text, encoding="utf-8")
     return text
 
 
@@ -213,11 +219,12 @@ def register_cli(subparsers) -> None:
     """Add ``figures`` to the ``delaunay-infill`` command line."""
     p = subparsers.add_parser("figures", help="redraw the paper's Figures 2 and 10 with measured densities")
     p.add_argument("-o", "--out", default="docs/images", help="output folder (default docs/images)")
+    p.add_argument("--table", default=None, help="markdown tables (default OUT/figures.md)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=_run)
 
 
 def _run(args) -> int:
-    text = write_figures(Path(args.out), seed=args.seed)
+    text = write_figures(Path(args.out), seed=args.seed, table=Path(args.table) if args.table else None)
     sys.stdout.write(text)
     return 0

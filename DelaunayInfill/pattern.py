@@ -206,6 +206,9 @@ class InfillPattern:
     @classmethod
     def _build_seamless(cls, area, dmap, width, seed, calibration, relax, sampler):
         zones = dmap.zones(area)
+        if dmap.feather > 0:  # calibrate the zone cores, not the blend bands between them
+            cores = [to_multipolygon(z.buffer(-0.5 * dmap.feather)) for z in zones]
+            zones = [core if core.area > 0 else z for core, z in zip(cores, zones)]
         targets = np.array(dmap.densities)
         lowest = float(min(targets))
         reach = 1.3 * (paper_radius(lowest, width) if calibration == "paper" else KAPPA * width / lowest)

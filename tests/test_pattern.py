@@ -115,9 +115,11 @@ def test_feather_blends_across_the_border():
         s = box(x0, 0, x1, 60)
         return length_in(result.segments, s) * 0.4 / s.area
 
-    assert strip(soft, 50, 60) > strip(sharp, 50, 60) + 0.03
-    assert strip(soft, 60, 70) < strip(sharp, 60, 70) - 0.03
-    assert abs(strip(soft, 100, 120) - 0.5) < 0.04  # the outer edge of the part does not blend
+    # the band next to the border holds intermediate densities ...
+    assert 0.15 < strip(soft, 60, 70) < strip(sharp, 60, 70) - 0.05
+    # ... while the zones' cores keep their targets, up to the outer edge of the part
+    assert abs(strip(soft, 0, 40) - 0.1) < 0.03
+    assert abs(strip(soft, 80, 120) - 0.5) < 0.04
 
 
 def stacked_share(lower, upper, tol):

@@ -1,0 +1,95 @@
+#!/usr/bin/env bash
+# The whole test suite, installing what it needs (the README's test command; .ci/run calls it).
+#
+#   bash scripts/test.sh            all tiers
+#   bash scripts/test.sh unit       unit + property tests only (three dependency sets)
+#
+# Tiers:
+#   unit    pytest tests/ (not engine, not gui) on three dependency sets:
+#           current pins, and the oldest pins Cura brings that have Python 3.11 wheels
+#           (numpy 1.23.5, scipy 1.9.3, with shapely 1.8.5 and with shapely 2.0.1)
+#   engine  tests/engine: real CuraEngine 4.13 slices, processed and checked independently
+#   gui     tests/gui: the real Cura 4.13 under Xvfb loads the plugin, slices, saves
+# A tier that cannot run fails; nothing is skipped.  Ends with one line "tests: N passed, M failed".
+set -u
+cd "$(dirname "$0")/.."
+ROOT="$PWD"
+WHAT="${1:-all}"
+PY="${PYTHON:-python3}"
+VENVS="$ROOT/.venvs"
+RESULTS="$ROOT/test-artifacts/junit"
+rm -rf "$RESULTS"; mkdir -p "$RESULTS"
+FAILED_STEPS=()
+
+log() { printf '\n=== %s ===\n' "$*"; }
+
+need_apt() {
+  local missing=()
+  for pkg in "$@"; do dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg"); done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  log "apt-get install ${missing[*]}"
+  local sudo=""; [ "$(id -u)" = 0 ] || sudo="sudo"
+  $sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+}
+
+make_venv() {  # make_venv NAME PIP-ARGS...
+  local dir="$VENVS/$1"; shift
+  local stamp="$dir/.installed"
+  local want="$*"
+  if [ ! -x "$dir/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+    log "venv $(basename "$dir"): $want"
+    rm -rf "$dir"
+    "$PY" -m venv "$dir" || return 1
+    "$dir/bin/python" -m pip install -q --upgrade pip >/dev/null || return 1
+    "$dir/bin/python" -m pip install -q "$@" || return 1
+    echo "$want" > "$stamp"
+  fi
+  # the project itself, editable, without touching the pinned dependencies
+  "$dir/bin/python" -m pip install -q --no-deps --no-build-isolation -e "$ROOT" >/dev/null 2>&1 \
+    || "$dir/bin/python" -m pip install -q --no-deps -e "$ROOT" >/dev/null || return 1
+}
+
+run_pytest() {  # run_pytest LABEL VENV ARGS...
+  local label="$1" venv="$2"; shift 2
+  log "pytest [$label] $*"
+  "$VENVS/$venv/bin/python" -m pytest -q -p no:cacheprovider --junitxml="$RESULTS/$label.xml" "$@"
+  local rc=$?
+  if [ $rc -ne 0 ]; then FAILED_STEPS+=("$label (exit $rc)"); fi
+}
+
+TEST_DEPS=(pytest hypothesis matplotlib)
+CURRENT=(numpy scipy shapely)
+OLDEST_S18=(numpy==1.23.5 scipy==1.9.3 shapely==1.8.5)
+OLDEST_S20=(numpy==1.23.5 scipy==1.9.3 shapely==2.0.1)
+
+make_venv current "${CURRENT[@]}" "${TEST_DEPS[@]}" || FAILED_STEPS+=("venv current")
+UNIT=(tests -m "not engine and not gui" --ignore=tests/engine --ignore=tests/gui)
+run_pytest unit-current current "${UNIT[@]}"
+make_venv oldest-shapely18 "${OLDEST_S18[@]}" "${TEST_DEPS[@]}" "matplotlib<3.9" || FAILED_STEPS+=("venv oldest-shapely18")
+run_pytest unit-oldest-shapely18 oldest-shapely18 "${UNIT[@]}"
+make_venv oldest-shapely20 "${OLDEST_S20[@]}" "${TEST_DEPS[@]}" "matplotlib<3.9" || FAILED_STEPS+=("venv oldest-shapely20")
+run_pytest unit-oldest-shapely20 oldest-shapely20 "${UNIT[@]}"
+
+if [ "$WHAT" = all ]; then
+  need_apt cura-engine cura xvfb xauth imagemagick python3-zeroconf python3-pip || FAILED_STEPS+=("apt-get install")
+  run_pytest engine current tests/engine
+  run_pytest gui current tests/gui
+fi
+
+# One closing line over every run.
+"$VENVS/current/bin/python" - "$RESULTS" <<'PYEOF'
+import glob, sys, xml.etree.ElementTree as ET
+passed = failed = skipped = 0
+for path in glob.glob(sys.argv[1] + "/*.xml"):
+    for suite in ET.parse(path).getroot().iter("testsuite"):
+        tests, fail, err, skip = (int(suite.get(k, 0)) for k in ("tests", "failures", "errors", "skipped"))
+        passed += tests - fail - err - skip
+        failed += fail + err
+        skipped += skip
+print(f"\ntests: {passed} passed, {failed} failed" + (f", {skipped} skipped" if skipped else ""))
+PYEOF
+if [ ${#FAILED_STEPS[@]} -ne 0 ]; then
+  printf 'FAILED: %s\n' "${FAILED_STEPS[@]}"
+  exit 1
+fi
+exit 0

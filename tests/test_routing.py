@@ -86,3 +86,16 @@ def test_order_paths_beats_input_order_on_travel():
     assert abs(travel - travel_length(ordered, start=(0.0, 0.0))) < 1e-6
     assert travel < 0.5 * travel_length(shuffled, start=(0.0, 0.0))
     assert abs(sum(LineString(p).length for p in ordered) - sum(LineString(p).length for p in paths)) < 1e-9
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10_000), st.integers(2, 80))
+def test_two_opt_never_travels_more_than_greedy_and_keeps_every_path(seed, count):
+    rng = np.random.default_rng(seed)
+    paths = [rng.uniform(0, 100, (int(rng.integers(2, 5)), 2)) for _ in range(count)]
+    greedy, t_greedy = order_paths(paths, start=(0.0, 0.0), rounds=0)
+    improved, t_improved = order_paths(paths, start=(0.0, 0.0))
+    assert t_improved <= t_greedy + 1e-9
+    assert abs(t_improved - travel_length(improved, start=(0.0, 0.0))) < 1e-6
+    key = lambda p: tuple(sorted([tuple(p[0]), tuple(p[-1])]))  # noqa: E731
+    assert sorted(map(key, improved)) == sorted(map(key, paths))

@@ -230,6 +230,9 @@ class InfillPattern:
             segments = points[unique_edges(triangles)]
             measured = np.array([measured_density(segments, z, width) for z in zones])
             error = np.abs(measured - targets)
+            if np.count_nonzero(settled) > 1:
+                # Zones above target can be thinned afterwards; shortfalls cannot.
+                error = np.where(measured > targets, 0.25 * error, error)
             worst = float(np.nanmax(np.where(settled, error, 0.0))) if len(error) else 0.0
             if best is None or worst < best[0]:
                 best = (worst, points, triangles, segments, measured, iteration)
@@ -238,12 +241,16 @@ class InfillPattern:
             ok = settled & np.isfinite(measured) & (measured > 0)
             step = np.where(ok, targets / np.where(ok, measured, 1.0), 1.0)
             step = np.where(settled & ~ok, 2.0, step)  # a zone with nothing printed: denser
-            # Half steps (in log scale): small zones respond in jumps and
-            # full steps would oscillate.
-            factors = factors * np.sqrt(np.clip(step, 0.5, 2.0))
+            # Half steps (in log scale) down: small zones respond in jumps and
+            # full steps would oscillate; zones that fall short take full steps
+            # up, since what ends up too dense can be thinned afterwards.
+            step = np.clip(step, 0.5, 2.0)
+            factors = factors * np.where(step > 1.0, step, np.sqrt(step))
         worst, points, triangles, segments, measured, iteration = best
         if calibration == "measured" and worst > _TOLERANCE and np.count_nonzero(settled) == 1:
             points, segments, measured = _fine_tune_scale(points, triangles, zones, targets, width, reach, area)
+        elif calibration == "measured" and worst > _TOLERANCE:
+            segments, measured = _thin_dense_zones(points, triangles, zones, targets, width)
         return cls(segments, points, triangles, area, dmap, width, "seamless", calibration, list(measured), iteration)
 
     @classmethod
@@ -364,6 +371,64 @@ def _fine_tune_scale(points, triangles, zones, targets, width, reach, area):
         lo, hi = (mid, hi) if got > target else (lo, mid)
     _, scaled, segments = best
     return scaled, segments, [measured_density(segments, z, width) for z in zones]
+
+
+def _thin_dense_zones(points, triangles, zones, targets, width):
+    """Leave out edges in zones that print denser than their target.
+
+    A zone smaller than about two of its own radii cannot reach a low target
+    in one triangulation: the edges between its denser neighbours' samples
+    cross it.  Such a zone gets its longest edges left out (first at most one
+    per triangle, so cells become quadrilaterals; never leaving a loose end)
+    until its printed density is as close to the target as whole edges allow.
+
+    Returns
+    -------
+    (segments, measured)
+        Printed edges (k, 2, 2) and the measured density per zone.
+    """
+    edges = unique_edges(triangles)
+    segments = points[edges]
+    keep = np.ones(len(edges), dtype=bool)
+    # Triangles on each side of every edge (-1 on the hull).
+    n = len(points)
+    tri_edges = np.sort(np.stack([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=1), axis=2)
+    edge_key = edges[:, 0].astype(np.int64) * n + edges[:, 1]
+    tri_edge_ids = np.searchsorted(edge_key, tri_edges[..., 0].astype(np.int64) * n + tri_edges[..., 1])
+    owners = np.full((len(edges), 2), -1, dtype=np.int64)
+    flat_edge = tri_edge_ids.ravel()
+    flat_tri = np.repeat(np.arange(len(triangles)), 3)
+    order = np.argsort(flat_edge, kind="stable")
+    first = np.r_[True, flat_edge[order][1:] != flat_edge[order][:-1]]
+    owners[flat_edge[order][first], 0] = flat_tri[order][first]
+    owners[flat_edge[order][~first], 1] = flat_tri[order][~first]
+    opened = np.zeros(len(triangles) + 1, dtype=bool)  # last slot stands for "no triangle"
+    length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
+    for zone, target in zip(zones, targets):
+        if zone.is_empty or zone.area <= 0:
+            continue
+        pieces, source = clip_segments(segments[keep], zone, return_index=True)
+        inside = np.bincount(np.flatnonzero(keep)[source], np.hypot(*(pieces[:, 1] - pieces[:, 0]).T), len(edges))
+        excess = (inside.sum() * width / zone.area - target) * zone.area / width  # mm of line too many
+        if excess <= 0:
+            continue
+        candidates = np.flatnonzero(keep & (inside >= 0.5 * length))
+        candidates = candidates[np.argsort(-length[candidates])]
+        degree = np.bincount(edges[keep].ravel(), minlength=n)
+        # First one edge per triangle; then any edge that leaves no loose end.
+        for strict in (True, False):
+            for e in candidates:
+                if excess - 0.5 * inside[e] <= 0:
+                    break
+                if not keep[e] or (strict and opened[owners[e]].any()) or degree[edges[e]].min() <= 2:
+                    continue
+                keep[e] = False
+                degree[edges[e]] -= 1
+                opened[owners[e]] = True
+                opened[-1] = False
+                excess -= inside[e]
+    segments = segments[keep]
+    return segments, [measured_density(segments, z, width) for z in zones]
 
 
 def _drop_slivers(points: np.ndarray, triangles: np.ndarray, radius_fn) -> np.ndarray:

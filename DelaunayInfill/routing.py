@@ -46,7 +46,7 @@ def _subdivide(segments: np.ndarray, max_length: float) -> np.ndarray:
     return np.stack([a + (b - a) * t0, a + (b - a) * t1], axis=1)
 
 
-def clip_segments(segments: np.ndarray, area) -> np.ndarray:
+def clip_segments(segments: np.ndarray, area, *, return_index: bool = False):
     """The parts of `segments` that lie inside `area`.
 
     Parameters
@@ -54,16 +54,21 @@ def clip_segments(segments: np.ndarray, area) -> np.ndarray:
     segments : ndarray, shape (k, 2, 2)
         Start and end points, mm.
     area : shapely (Multi)Polygon
+    return_index : bool
+        Also return, for every piece, the index of the segment it came from.
 
     Returns
     -------
     ndarray, shape (k', 2, 2)
         Inside pieces, in input order; a segment crossing the boundary is cut
         at the crossing points.
+    ndarray of int, shape (k',)
+        Only with `return_index`.
     """
     segments = np.asarray(segments, dtype=float).reshape(-1, 2, 2)
     if len(segments) == 0 or area.is_empty:
-        return np.zeros((0, 2, 2))
+        empty = np.zeros((0, 2, 2))
+        return (empty, np.zeros(0, np.intp)) if return_index else empty
     boundary = boundary_segments(area)
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
     longest = float(length.max()) if len(length) else 0.0
@@ -101,7 +106,8 @@ def clip_segments(segments: np.ndarray, area) -> np.ndarray:
     end = a + (b - a) * t1[:, None]
     mid = 0.5 * (start + end)
     inside = contains_xy(area, mid[:, 0], mid[:, 1])
-    return np.stack([start[inside], end[inside]], axis=1)
+    pieces = np.stack([start[inside], end[inside]], axis=1)
+    return (pieces, sid[inside]) if return_index else pieces
 
 
 def _vertex_ids(points: np.ndarray) -> tuple[np.ndarray, int]:

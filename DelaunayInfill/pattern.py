@@ -250,7 +250,7 @@ class InfillPattern:
         if calibration == "measured" and worst > _TOLERANCE and np.count_nonzero(settled) == 1:
             points, segments, measured = _fine_tune_scale(points, triangles, zones, targets, width, reach, area)
         elif calibration == "measured" and worst > _TOLERANCE:
-            segments, measured = _thin_dense_zones(points, triangles, zones, targets, width)
+            points, triangles, segments, measured = _balance_zones(points, triangles, zones, targets, width)
         return cls(segments, points, triangles, area, dmap, width, "seamless", calibration, list(measured), iteration)
 
     @classmethod
@@ -371,6 +371,56 @@ def _fine_tune_scale(points, triangles, zones, targets, width, reach, area):
         lo, hi = (mid, hi) if got > target else (lo, mid)
     _, scaled, segments = best
     return scaled, segments, [measured_density(segments, z, width) for z in zones]
+
+
+def _balance_zones(points, triangles, zones, targets, width, rounds: int = 12):
+    """Bring zones that calibration cannot reach to their targets.
+
+    A zone smaller than about two of its own radii cannot reach its target in
+    one triangulation: a sparse one is crossed by its denser neighbours'
+    edges, a dense one loses samples near a sparse neighbour (whose samples
+    keep their larger radius free).  Each round thins the zones that print
+    too dense (`_thin_dense_zones`), then inserts circumcentres of the widest
+    triangles in zones that print too sparse (Delaunay refinement: edges go
+    where the zone is emptiest and the triangulation stays Delaunay).
+
+    Returns
+    -------
+    (points, triangles, segments, measured)
+    """
+    for _ in range(rounds):
+        segments, measured = _thin_dense_zones(points, triangles, zones, targets, width)
+        short = [k for k, (z, t, m) in enumerate(zip(zones, targets, measured)) if z.area > 0 and m < t - _TOLERANCE]
+        if not short:
+            break
+        a, b, c = (points[triangles[:, k]] for k in range(3))
+        d = 2.0 * (a[:, 0] * (b[:, 1] - c[:, 1]) + b[:, 0] * (c[:, 1] - a[:, 1]) + c[:, 0] * (a[:, 1] - b[:, 1]))
+        ok = np.abs(d) > 1e-12
+        d = np.where(ok, d, 1.0)
+        sa, sb, sc = ((p * p).sum(axis=1) for p in (a, b, c))
+        center = np.c_[
+            (sa * (b[:, 1] - c[:, 1]) + sb * (c[:, 1] - a[:, 1]) + sc * (a[:, 1] - b[:, 1])) / d,
+            (sa * (c[:, 0] - b[:, 0]) + sb * (a[:, 0] - c[:, 0]) + sc * (b[:, 0] - a[:, 0])) / d,
+        ]
+        radius = np.where(ok, np.hypot(*(center - a).T), 0.0)
+        added = []
+        for k in short:
+            inside = np.flatnonzero(contains_xy(zones[k], center[:, 0], center[:, 1]))
+            if inside.size == 0:
+                continue
+            # About 3 circumradii of line per insertion; at most a third of
+            # the zone's triangles per round.
+            missing = (targets[k] - measured[k]) * zones[k].area / width
+            widest = inside[np.argsort(-radius[inside])]
+            count = int(np.clip(missing / max(3.0 * radius[widest[0]], 1e-9), 1, max(1, inside.size // 3)))
+            added.append(center[widest[:count]])
+        if not added:
+            break
+        points = np.r_[points, np.concatenate(added)]
+        triangles = delaunay_triangles(points)
+    else:
+        segments, measured = _thin_dense_zones(points, triangles, zones, targets, width)
+    return points, triangles, segments, measured
 
 
 def _thin_dense_zones(points, triangles, zones, targets, width):

@@ -18,7 +18,6 @@ import argparse
 import statistics
 import time
 
-import numpy as np
 from scipy.spatial import Delaunay
 from scipy.stats import qmc
 from shapely.geometry import Point, box
@@ -92,7 +91,6 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeat", type=int, default=15)
     args = parser.parse_args()
-    np.random.seed(0)
     print(sampler_table(args.repeat))
     print()
     print(layer_table(args.repeat))

@@ -135,7 +135,7 @@ class DelaunayInfillExtension(Extension):
 
     @staticmethod
     def _checkDependencies() -> str | None:
-        if sys.version_info < (3, 10):  # the engine is Python 3.10 code (Cura 4.13 on Linux distros, 5.1+)
+        if sys.version_info < (3, 10):  # noqa: UP036 - Cura 4.13 bundles (Windows, macOS, AppImage) run Python 3.8
             return (
                 "Delaunay variable infill needs Cura running on Python 3.10 or later (Cura 5.1 and later, or a "
                 f"Linux distribution's Cura 4.13); this Cura runs Python {sys.version.split()[0]}. Cura's own infill is used."

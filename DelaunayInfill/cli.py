@@ -1,0 +1,268 @@
+"""``delaunay-infill``: process Cura G-code, preview a layer, run the demo.
+
+Subcommands: ``process``, ``preview``, ``demo``; plus ``figures`` (lead) and
+``package`` / ``install-cura`` (packaging) when those modules are present.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+import time
+
+__all__ = ["main", "build_parser"]
+
+EXIT_OK, EXIT_ERROR, EXIT_REFUSED = 0, 1, 2
+
+
+def _percent(text: str) -> float:
+    try:
+        value = float(text.strip().rstrip("%"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a percentage: {text!r}") from None
+    if not (0 < value <= 100):
+        raise argparse.ArgumentTypeError(f"a density must be in (0, 100] %, got {value:g}")
+    return value / 100.0
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {value:g}")
+    return value
+
+
+def _named_percent(text: str) -> tuple[str, float]:
+    name, sep, pct = text.rpartition(":")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected NAME:PCT, got {text!r}")
+    return name, _percent(pct)
+
+
+def _offset(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y[,Z] in mm, got {text!r}") from None
+    if len(values) not in (2, 3):
+        raise argparse.ArgumentTypeError(f"expected X,Y[,Z] in mm, got {text!r}")
+    return values
+
+
+class _Progress:
+    """One updating progress line on stderr for long runs."""
+
+    def __init__(self, label: str, enabled: bool):
+        self.label = label
+        self.enabled = enabled
+        self.start = time.perf_counter()
+        self.shown = False
+        self.last = 0.0
+
+    def __call__(self, fraction: float) -> None:
+        now = time.perf_counter()
+        if not self.enabled or now - self.start < 1.0 or (now - self.last < 0.5 and fraction < 1.0):
+            return
+        self.last = now
+        self.shown = True
+        elapsed = now - self.start
+        eta = elapsed / fraction - elapsed if fraction > 0 else 0.0
+        sys.stderr.write(f"\r{self.label}: {fraction * 100:5.1f} %  ({elapsed:.0f} s, about {eta:.0f} s left)   ")
+        sys.stderr.flush()
+
+    def done(self) -> None:
+        if self.shown:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+# --------------------------------------------------------------------------- process
+def _cmd_process(args) -> int:
+    from .gcode import GCodeError, MeshSettings, ProcessSettings, Region, process_file
+
+    if args.output is None and not args.in_place:
+        print("error: give -o OUT.gcode, or --in-place to replace the input", file=sys.stderr)
+        return EXIT_REFUSED
+    if args.output is not None and args.in_place:
+        print("error: -o and --in-place exclude each other", file=sys.stderr)
+        return EXIT_REFUSED
+    try:
+        settings = ProcessSettings(
+            density=args.density,
+            line_width=args.line_width,
+            seed=args.seed,
+            layout=args.layout,
+            flow=args.flow if args.flow is not None else 1.0,
+            speed=args.speed,
+            relax=args.relax,
+            meshes={name: MeshSettings(density=pct) for name, pct in args.mesh},
+        )
+        settings.validate()
+        offset = args.modifier_offset or (0.0, 0.0, 0.0)
+        regions = []
+        for spec in args.modifier:
+            path, pct = _named_percent(spec)
+            if not os.path.isfile(path):
+                raise ValueError(f"modifier STL not found: {path}")
+            regions.append(Region.from_stl(path, pct, offset=offset))
+    except (ValueError, argparse.ArgumentTypeError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+    if not os.path.isfile(args.input):
+        print(f"error: no such file: {args.input}", file=sys.stderr)
+        return EXIT_REFUSED
+    big = os.path.getsize(args.input) > 5_000_000
+    progress = _Progress(f"processing {os.path.basename(args.input)}", enabled=not args.quiet and (big or sys.stderr.isatty()))
+    try:
+        report = process_file(
+            args.input, args.output, settings, regions=regions, in_place=args.in_place, progress=progress
+        )
+    except GCodeError as exc:
+        progress.done()
+        print(f"error: {args.input}: {exc}; nothing was written", file=sys.stderr)
+        return EXIT_REFUSED
+    except (ValueError, FileNotFoundError) as exc:
+        progress.done()
+        print(f"error: {exc}; nothing was written", file=sys.stderr)
+        return EXIT_REFUSED
+    progress.done()
+    if report.already_processed:
+        print(f"{args.input} was already processed by DelaunayInfill (marker in its header): nothing to do, nothing written")
+        return EXIT_OK
+    out = args.input if args.in_place else args.output
+    if not args.quiet:
+        print(report.format_table())
+        print(f"wrote {out}")
+    if args.verify:
+        from .gcode.verify import verify_files
+
+        check = verify_files(args.input if not args.in_place else out, out, flow=settings.flow) if not args.in_place else None
+        if check is not None:
+            print(check.summary())
+            for problem in check.problems:
+                print(f"  - {problem}")
+            if not check.ok:
+                return EXIT_ERROR
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- preview
+def _cmd_preview(args) -> int:
+    from .gcode.preview import MATPLOTLIB_MISSING, render_layer
+
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        print(f"error: {MATPLOTLIB_MISSING}", file=sys.stderr)
+        return EXIT_REFUSED
+    for path in [args.input, args.before] if args.before else [args.input]:
+        if not os.path.isfile(path):
+            print(f"error: no such file: {path}", file=sys.stderr)
+            return EXIT_REFUSED
+    out = args.output or f"{os.path.splitext(os.path.basename(args.input))[0]}_layer{args.layer}.png"
+    try:
+        render_layer(args.input, args.layer, out, before=args.before, occurrence=args.occurrence)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+    print(f"wrote {out}")
+    return EXIT_OK
+
+
+# --------------------------------------------------------------------------- demo
+def _cmd_demo(args) -> int:
+    from .gcode.demo import run_demo
+
+    if args.reslice:
+        from .curaengine import CuraEngineError, find_curaengine
+
+        try:
+            find_curaengine()
+        except CuraEngineError as exc:
+            print(f"error: --reslice needs CuraEngine: {exc}", file=sys.stderr)
+            return EXIT_REFUSED
+    return run_demo(args.output, reslice=args.reslice)
+
+
+# --------------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="delaunay-infill",
+        description="Replace Cura's sparse infill with Delaunay-triangulated variable-density infill.",
+    )
+    from . import __version__
+
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser(
+        "process",
+        help="replace the infill of a Cura G-code file",
+        description="Replace Cura's ;TYPE:FILL with Delaunay infill. Settings not given are inferred "
+        "from the G-code (line width, flow, speed, retraction, Cura's own density).",
+    )
+    p.add_argument("input", metavar="IN.gcode")
+    p.add_argument("-o", "--output", metavar="OUT.gcode", help="output file (written atomically)")
+    p.add_argument("--in-place", action="store_true", help="replace IN.gcode (atomically)")
+    p.add_argument("--density", type=_percent, metavar="PCT", help="base infill density in %% (default: Cura's)")
+    p.add_argument("--line-width", type=_positive, metavar="MM", help="infill line width (default: from the walls)")
+    p.add_argument("--modifier", action="append", default=[], metavar="FILE.stl:PCT",
+                   help="a density region from an STL (G-code coordinates, see --modifier-offset); repeatable")
+    p.add_argument("--modifier-offset", type=_offset, metavar="X,Y[,Z]",
+                   help="shift modifier STLs into G-code coordinates (e.g. 110,110 for a model that CuraEngine "
+                   "centred on a 220 mm bed)")
+    p.add_argument("--mesh", action="append", default=[], type=_named_percent, metavar="NAME:PCT",
+                   help="density of a ;MESH: in the G-code (a Cura infill_mesh modifier, or a model); repeatable")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--layout", choices=("seamless", "paper"), default="seamless",
+                   help="seamless: one triangulation across regions (default); paper: one per convex part")
+    p.add_argument("--flow", type=_percent, metavar="PCT", help="extrusion relative to Cura's infill (default 100)")
+    p.add_argument("--speed", type=_positive, metavar="MM_S", help="infill speed (default: Cura's)")
+    p.add_argument("--relax", type=int, default=0, help="relaxation steps (default 0)")
+    p.add_argument("--verify", action="store_true", help="check the output against the input afterwards")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress line or summary")
+    p.set_defaults(func=_cmd_process)
+
+    p = sub.add_parser("preview", help="top view of one layer as PNG, coloured by line type",
+                       description="Draw one layer (walls, skin, infill, travel) into a PNG. Needs matplotlib.")
+    p.add_argument("input", metavar="FILE.gcode")
+    p.add_argument("--layer", type=int, required=True, metavar="N", help="the ;LAYER: number")
+    p.add_argument("-o", "--output", metavar="layer.png")
+    p.add_argument("--before", metavar="ORIGINAL.gcode", help="draw this file's layer beside it for comparison")
+    p.add_argument("--occurrence", type=int, default=0, help="which layer N when numbers repeat (one-at-a-time)")
+    p.set_defaults(func=_cmd_preview)
+
+    p = sub.add_parser("demo", help="run the bundled demo (star with the paper's Figure 10 densities, H-bracket)",
+                       description="Process bundled CuraEngine G-code; write G-code, layer PNGs and a summary.")
+    p.add_argument("-o", "--output", default="delaunay-demo", help="output folder (default ./delaunay-demo)")
+    p.add_argument("--reslice", action="store_true", help="slice the bundled STLs with CuraEngine first")
+    p.set_defaults(func=_cmd_demo)
+
+    for module in (".figures", ".packaging"):
+        try:
+            mod = importlib.import_module(module, __package__)
+        except ImportError:
+            continue
+        register = getattr(mod, "register_cli", None)
+        if register is not None:
+            register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("interrupted; nothing was written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

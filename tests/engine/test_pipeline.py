@@ -1,0 +1,138 @@
+"""Checks 1-5 on every case of the matrix, for the Python API and the CLI.
+
+The pipeline under test is DelaunayInfill.gcode (task A); the checks are the
+independent ones of gcode_check.py.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+
+import pytest
+
+from . import gcode_check as gc
+from .conftest import cli_command
+
+
+def _parsed(path_or_text: str, is_path: bool = True) -> gc.Parsed:
+    if is_path:
+        with open(path_or_text, encoding="utf-8") as f:
+            path_or_text = f.read()
+    return gc.parse_gcode(path_or_text)
+
+
+@pytest.fixture(scope="session")
+def parsed_pair(processed):
+    return _parsed(processed.sliced.gcode), gc.parse_gcode(processed.text)
+
+
+def _context(processed):
+    case = processed.sliced.case
+    settings = gc.SliceSettings.from_resolved(processed.sliced.resolved)
+    return case, settings, case.geometry()
+
+
+def test_1_everything_but_fill_is_unchanged(processed, parsed_pair):
+    orig, new = parsed_pair
+    result = gc.check_unchanged(orig, new)
+    assert result.ok, result.report()
+    assert result.figures["fill_handbacks"] > 0
+
+
+def test_2_infill_inside_the_infill_area_and_everywhere(processed, parsed_pair):
+    orig, new = parsed_pair
+    case, settings, geometry = _context(processed)
+    min_density = min([case.density] + [r.target for r in case.regions()])
+    result = gc.check_infill_area(orig, new, geometry, settings, min_density=min_density)
+    assert result.ok, result.report()
+
+
+def test_3_extrusion_continuity_and_travel(processed, parsed_pair):
+    orig, new = parsed_pair
+    _, _, geometry = _context(processed)
+    result = gc.check_extrusion(orig, new, geometry)
+    assert result.ok, result.report()
+    # the infill really is new: not Cura's lines
+    old_fill, new_fill = orig.fill_moves(extruding=True), new.fill_moves(extruding=True)
+    assert len(new_fill) and not (len(old_fill) == len(new_fill) and (old_fill[:, 2:6] == new_fill[:, 2:6]).all())
+
+
+# The paper's Figure 10 regions are smaller than two of their own Poisson radii at 0.4 mm lines
+# (the 10 % centre: 13.5 mm circumradius against r = 10.8 mm) and their shapes come from the
+# modifiers' own FILL lines in the G-code: measured there, they land within 4 points (docs/engine-tier.md);
+# the issue's own case, the star with two modifier boxes, is held to 2 points.
+REGION_TOLERANCE = {"star_figure10": 0.04}
+
+
+def test_4_region_densities_within_two_points(processed, parsed_pair):
+    _, new = parsed_pair
+    case, settings, geometry = _context(processed)
+    tolerance = REGION_TOLERANCE.get(case.name, 0.02)
+    result = gc.check_region_densities(new, geometry, settings, case.regions(), tolerance=tolerance)
+    assert result.ok, result.report()
+
+
+def test_5_marker_and_reprocessing_is_a_no_op(processed, parsed_pair, tmp_path):
+    _, new = parsed_pair
+    result = gc.check_marker(new)
+    assert result.ok, result.report()
+    out = tmp_path / "again.gcode"
+    before = open(processed.path, "rb").read()
+    proc = subprocess.run([*cli_command(), "process", processed.path, "-o", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "already" in (proc.stdout + proc.stderr).lower(), "no message saying the file was already processed"
+    assert not out.exists() or out.read_bytes() == before
+    assert open(processed.path, "rb").read() == before
+
+
+def test_api_report_matches_the_independent_measurement(processed_api):
+    """The report's densities agree with the checker's measurement (±4 points: border conventions differ)."""
+    report = processed_api.report
+    assert not report.failed_layers, report.failure_messages
+    assert report.layers_processed > 0
+    case = processed_api.sliced.case
+    settings = gc.SliceSettings.from_resolved(processed_api.sliced.resolved)
+    measured = gc.measure_region_densities(gc.parse_gcode(processed_api.text), case.geometry(), settings,
+                                           case.regions())
+    reported = {r.name: r for r in report.regions}
+    for name, (value, area) in measured.items():
+        if area < 100.0:
+            continue  # no such region in this case (e.g. modifiers cover the whole part)
+        match = reported.get(name) or next((r for k, r in reported.items() if k.endswith(" " + name)), None)
+        assert match is not None, f"the report has no entry for {name}: {sorted(reported)}"
+        assert abs(match.measured - value) <= 0.04, (name, match, value)
+
+
+def test_in_memory_and_streamed_outputs_are_identical(processed_api, tmp_path):
+    """process_gcode on Cura's list and process_file on the file give the same G-code."""
+    from DelaunayInfill import process_file
+
+    out = tmp_path / "file.gcode"
+    report = process_file(processed_api.sliced.gcode, str(out))
+    assert not report.failed_layers
+    assert out.read_text(encoding="utf-8") == processed_api.text
+
+
+def test_same_seed_same_output_other_seed_other_infill(slices, tmp_path):
+    from DelaunayInfill import process_file
+    from DelaunayInfill.gcode import ProcessSettings
+
+    from .conftest import MATRIX
+
+    sliced = slices.get(MATRIX["star"])
+    outs = []
+    for name, seed in (("a", 1), ("b", 1), ("c", 2)):
+        path = tmp_path / f"{name}.gcode"
+        process_file(sliced.gcode, str(path), settings=ProcessSettings(seed=seed))
+        outs.append(path.read_text(encoding="utf-8"))
+    assert outs[0] == outs[1]
+    assert outs[0] != outs[2]
+
+
+def test_cli_prints_a_summary(processed_cli):
+    proc = processed_cli.report
+    text = proc.stdout + proc.stderr
+    assert "layer" in text.lower() and "%" in text
+    assert os.path.getsize(processed_cli.path) > 0

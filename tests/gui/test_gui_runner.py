@@ -1,0 +1,37 @@
+"""The GUI tier's own machinery, without starting Cura: it must fail loudly, never skip."""
+
+from __future__ import annotations
+
+import cura_runner
+import pytest
+from cura_profile import data_dir, seed_profile
+
+
+def test_missing_cura_is_a_failure_not_a_skip(monkeypatch):
+    monkeypatch.setattr(cura_runner, "REQUIRED_COMMANDS", ("cura-that-does-not-exist",))
+    with pytest.raises(cura_runner.CuraTierError, match="cura-that-does-not-exist"):
+        cura_runner.ensure_dependencies()
+
+
+def test_seeded_profile_has_an_active_printer(tmp_path):
+    data = seed_profile(tmp_path)
+    assert data == data_dir(tmp_path)
+    config = (tmp_path / ".config" / "cura" / "4.13" / "cura.cfg").read_text()
+    assert "active_machine = Creality Ender-3" in config and "last_run_version = 4.13.0" in config
+    stack = (data / "machine_instances" / "Creality+Ender-3.global.cfg").read_text()
+    assert "7 = creality_ender3" in stack and "0 = Creality Ender-3_user" in stack
+    assert (data / "user" / "Creality+Ender-3_user.inst.cfg").exists()
+
+
+def test_log_errors_are_grouped_with_their_traceback():
+    log = "\n".join([
+        "2026-01-01 10:00:00,000 - INFO - [MainThread] x.y [1]: fine",
+        "2026-01-01 10:00:01,000 - ERROR - [JobQueueWorker [1]] DelaunayInfill.cura.job.run [54]: Exception: boom",
+        "2026-01-01 10:00:01,001 - ERROR - [JobQueueWorker [1]] DelaunayInfill.cura.job.run [54]: Traceback",
+        "2026-01-01 10:00:01,002 - ERROR - [JobQueueWorker [1]] DelaunayInfill.cura.job.run [54]: ValueError: why",
+        "2026-01-01 10:00:02,000 - ERROR - [MainThread] Toolbox.x [9]: no network",
+    ])
+    run = cura_runner.CuraRun(folder=None, status={}, cura_log=log, cura_out="", seconds=0.0)
+    blocks = run.error_blocks("DelaunayInfill")
+    assert len(blocks) == 1 and "ValueError: why" in blocks[0]
+    assert run.error_blocks("Toolbox") == ["2026-01-01 10:00:02,000 - ERROR - [MainThread] Toolbox.x [9]: no network"]

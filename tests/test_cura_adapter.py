@@ -1,0 +1,89 @@
+"""Cura's values (a SceneSnapshot) → the G-code pass's settings, and the estimate correction.
+
+Pure Python: DelaunayInfill/cura/adapter.py and snapshot.py's data classes need no Cura.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from DelaunayInfill.cura.adapter import adjusted_estimates, build_settings, failed_layers
+from DelaunayInfill.cura.snapshot import MeshSnapshot, SceneSnapshot
+from DelaunayInfill.gcode import ProcessReport
+
+
+def _model(name, enabled=True, density=20, **values):
+    base = {"infill_sparse_density": density, "infill_line_width": 0.4, "speed_infill": 50, "infill_overlap_mm": 0.04,
+            "delaunay_infill_seed": 3, "delaunay_infill_layout": "paper", "acceleration_infill": 1500}
+    return MeshSnapshot(name=name, values={**base, **values}, enabled=enabled)
+
+
+def _snapshot(meshes, **glob):
+    return SceneSnapshot(
+        global_values={"machine_width": 235, "machine_depth": 235, "machine_gcode_flavor": "RepRap (Marlin/Sprinter)",
+                       "relative_extrusion": False, "machine_acceleration": 500, **glob},
+        extruder_values={0: {"material_diameter": 1.75, "retraction_enable": True, "retraction_amount": 5,
+                             "retraction_retract_speed": 45, "retraction_prime_speed": 40, "speed_travel": 150,
+                             "retraction_hop_enabled": True, "retraction_hop": 0.4, "retraction_min_travel": 1.5},
+                         1: {"material_diameter": 2.85, "retraction_enable": False, "retraction_amount": 8}},
+        meshes=meshes,
+    )
+
+
+def test_cura_values_become_fractions_and_per_mesh_settings():
+    snapshot = _snapshot([_model("star.stl", density=35, infill_line_width=0.5), _model("cube.stl", enabled=False)])
+    settings, regions = build_settings(snapshot)
+    assert settings.density == pytest.approx(0.35) and settings.line_width == 0.5
+    assert settings.seed == 3 and settings.layout == "paper" and settings.flow == 1.0
+    assert settings.process_unlisted_meshes is False
+    assert settings.meshes["star.stl"].enabled and settings.meshes["star.stl"].density == pytest.approx(0.35)
+    assert settings.meshes["cube.stl"].enabled is False  # listed, so the pass leaves it exactly as Cura made it
+    assert (settings.retraction_amount, settings.retraction_hop, settings.retraction_min_travel) == (5, 0.4, 1.5)
+    assert settings.travel_speed == 150 and settings.filament_diameter == 1.75
+    assert settings.volumetric_e is False and settings.relative_e is False
+    assert settings.acceleration == 500  # acceleration control off: the machine's
+    assert regions == []
+    settings.validate()
+
+
+def test_the_infill_extruder_drives_retraction_and_filament():
+    star = _model("star.stl")
+    star.extruder_nr = 1
+    settings, _ = build_settings(_snapshot([star], machine_gcode_flavor="UltiGCode", acceleration_enabled=True))
+    assert settings.filament_diameter == 2.85
+    assert settings.retraction_amount == 0.0  # retraction off on that extruder
+    assert settings.volumetric_e is True
+    assert settings.acceleration == 1500
+
+
+def test_regions_come_from_enabled_modifiers_in_gcode_coordinates():
+    triangles = np.zeros((12, 3, 3))
+    triangles[:, :, 0] = 100.0
+    region = MeshSnapshot(name="DelaunayRegion_1", values={"infill_sparse_density": 60, "infill_mesh": True},
+                          enabled=True, is_region=True, triangles=triangles)
+    ignored = MeshSnapshot(name="elsewhere", values={"infill_sparse_density": 5, "infill_mesh": True},
+                           enabled=False, is_region=True, triangles=triangles)
+    settings, regions = build_settings(_snapshot([_model("star.stl"), region, ignored]))
+    assert [r.name for r in regions] == ["DelaunayRegion_1"]
+    assert regions[0].density == pytest.approx(0.6)
+    assert settings.meshes["DelaunayRegion_1"].region_density == pytest.approx(0.6)
+    assert settings.meshes["elsewhere"].enabled is False
+
+
+def test_nothing_enabled_is_refused():
+    with pytest.raises(ValueError, match="no model"):
+        build_settings(_snapshot([_model("star.stl", enabled=False)]))
+
+
+def test_estimates_are_corrected_by_the_report():
+    report = ProcessReport(time_before_s=1000.0, time_after_s=1100.0, filament_before_mm=2000.0,
+                           filament_after_mm=1900.0, failed_layers=[7, 9])
+    times, amounts = adjusted_estimates({"infill": 300.0, "inset_0": 500.0}, [5000.0], report,
+                                        _snapshot([_model("star.stl")]))
+    assert times == {"infill": 400.0, "inset_0": 500.0}
+    assert amounts[0] == pytest.approx(5000.0 - 100.0 * math.pi * 0.875**2)
+    assert failed_layers(report) == [7, 9]
+    assert adjusted_estimates({}, [], object(), _snapshot([_model("star.stl")])) is None

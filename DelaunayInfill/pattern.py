@@ -215,6 +215,9 @@ class InfillPattern:
         sampling_area = to_multipolygon(area.buffer(reach, 8))
         radius_of = (lambda d: paper_radius(d, width)) if calibration == "paper" else (lambda d: KAPPA * width / d)
         settled = np.array([z.area > 0 for z in zones])
+        # Zones under about 4 x 4 of their own radii cannot be calibrated by the
+        # radius alone; they are balanced by thinning or refinement at the end.
+        small = settled & np.array([z.area < 16.0 * radius_of(t) ** 2 for z, t in zip(zones, targets)])
         factors = np.ones(len(targets))
         best = None
         for iteration in range(1, _MAX_ITERATIONS + 1):
@@ -230,9 +233,8 @@ class InfillPattern:
             segments = points[unique_edges(triangles)]
             measured = np.array([measured_density(segments, z, width) for z in zones])
             error = np.abs(measured - targets)
-            if np.count_nonzero(settled) > 1:
-                # Zones above target can be thinned afterwards; shortfalls cannot.
-                error = np.where(measured > targets, 0.25 * error, error)
+            # Small zones above target can be thinned afterwards; shortfalls cannot.
+            error = np.where(small & (measured > targets), 0.25 * error, error)
             worst = float(np.nanmax(np.where(settled, error, 0.0))) if len(error) else 0.0
             if best is None or worst < best[0]:
                 best = (worst, points, triangles, segments, measured, iteration)
@@ -245,12 +247,12 @@ class InfillPattern:
             # full steps would oscillate; zones that fall short take full steps
             # up, since what ends up too dense can be thinned afterwards.
             step = np.clip(step, 0.5, 2.0)
-            factors = factors * np.where(step > 1.0, step, np.sqrt(step))
+            factors = factors * np.where(small & (step > 1.0), step, np.sqrt(step))
         worst, points, triangles, segments, measured, iteration = best
         if calibration == "measured" and worst > _TOLERANCE and np.count_nonzero(settled) == 1:
             points, segments, measured = _fine_tune_scale(points, triangles, zones, targets, width, reach, area)
-        elif calibration == "measured" and worst > _TOLERANCE:
-            points, triangles, segments, measured = _balance_zones(points, triangles, zones, targets, width)
+        elif calibration == "measured" and worst > _TOLERANCE and small.any():
+            points, triangles, segments, measured = _balance_zones(points, triangles, zones, targets, width, small)
         return cls(segments, points, triangles, area, dmap, width, "seamless", calibration, list(measured), iteration)
 
     @classmethod
@@ -373,7 +375,7 @@ def _fine_tune_scale(points, triangles, zones, targets, width, reach, area):
     return scaled, segments, [measured_density(segments, z, width) for z in zones]
 
 
-def _balance_zones(points, triangles, zones, targets, width, rounds: int = 12):
+def _balance_zones(points, triangles, zones, targets, width, small, rounds: int = 12):
     """Bring zones that calibration cannot reach to their targets.
 
     A zone smaller than about two of its own radii cannot reach its target in
@@ -384,13 +386,15 @@ def _balance_zones(points, triangles, zones, targets, width, rounds: int = 12):
     triangles in zones that print too sparse (Delaunay refinement: edges go
     where the zone is emptiest and the triangulation stays Delaunay).
 
+    Only the zones flagged in `small` are balanced.
+
     Returns
     -------
     (points, triangles, segments, measured)
     """
     for _ in range(rounds):
-        segments, measured = _thin_dense_zones(points, triangles, zones, targets, width)
-        short = [k for k, (z, t, m) in enumerate(zip(zones, targets, measured)) if z.area > 0 and m < t - _TOLERANCE]
+        segments, measured = _thin_dense_zones(points, triangles, zones, targets, width, small)
+        short = [k for k in np.flatnonzero(small) if measured[k] < targets[k] - _TOLERANCE]
         if not short:
             break
         a, b, c = (points[triangles[:, k]] for k in range(3))
@@ -419,11 +423,11 @@ def _balance_zones(points, triangles, zones, targets, width, rounds: int = 12):
         points = np.r_[points, np.concatenate(added)]
         triangles = delaunay_triangles(points)
     else:
-        segments, measured = _thin_dense_zones(points, triangles, zones, targets, width)
+        segments, measured = _thin_dense_zones(points, triangles, zones, targets, width, small)
     return points, triangles, segments, measured
 
 
-def _thin_dense_zones(points, triangles, zones, targets, width):
+def _thin_dense_zones(points, triangles, zones, targets, width, small):
     """Leave out edges in zones that print denser than their target.
 
     A zone smaller than about two of its own radii cannot reach a low target
@@ -454,8 +458,8 @@ def _thin_dense_zones(points, triangles, zones, targets, width):
     owners[flat_edge[order][~first], 1] = flat_tri[order][~first]
     opened = np.zeros(len(triangles) + 1, dtype=bool)  # last slot stands for "no triangle"
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
-    for zone, target in zip(zones, targets):
-        if zone.is_empty or zone.area <= 0:
+    for zone, target, thin in zip(zones, targets, small):
+        if not thin or zone.is_empty or zone.area <= 0:
             continue
         pieces, source = clip_segments(segments[keep], zone, return_index=True)
         inside = np.bincount(np.flatnonzero(keep)[source], np.hypot(*(pieces[:, 1] - pieces[:, 0]).T), len(edges))

@@ -1,0 +1,108 @@
+"""Inferring what the G-code does not state: line width, Cura's infill density, flow."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .area import runs_of, sample_segments
+from .read import WALL_INNER, WALL_OUTER, LayerParse
+
+__all__ = ["wall_line_width", "infill_density", "e_per_mm"]
+
+
+def _segments_of(runs: list[np.ndarray]) -> np.ndarray:
+    if not runs:
+        return np.zeros((0, 2, 2))
+    return np.concatenate([np.stack([r[:-1], r[1:]], axis=1) for r in runs])
+
+
+def wall_line_width(parse: LayerParse, mesh: str) -> float | None:
+    """Centre distance between the outer wall and the first inner wall, mm.
+
+    Cura puts the first inner wall (w0 + wx) / 2 inside the outer one; with
+    equal widths that is the line width.  None without both walls.
+    """
+    m = parse.moves
+    in_mesh = parse.mesh_mask(mesh)
+    moved = (m["x1"] != m["x0"]) | (m["y1"] != m["y0"])
+    extr = in_mesh & moved & (m["de"] > 0)
+    outer = _segments_of(runs_of(parse, extr & (m["kind"] == WALL_OUTER)))
+    inner = _segments_of(runs_of(parse, extr & (m["kind"] == WALL_INNER)))
+    if len(outer) == 0 or len(inner) == 0:
+        return None
+    tree = cKDTree(sample_segments(outer, 0.02))
+    probe = sample_segments(inner, 0.5)
+    d, _ = tree.query(probe, distance_upper_bound=3.0)
+    d = d[np.isfinite(d)]
+    if d.size < 5:
+        return None
+    w = float(np.median(d))
+    return w if 0.05 <= w <= 3.0 else None
+
+
+def e_per_mm(parse: LayerParse, mask: np.ndarray) -> float | None:
+    """Extrusion per mm of path of the masked extruding moves (E units/mm)."""
+    m = parse.moves
+    dx = m["x1"][mask] - m["x0"][mask]
+    dy = m["y1"][mask] - m["y0"][mask]
+    length = np.hypot(dx, dy)
+    de = m["de"][mask]
+    ok = (length > 1e-6) & (de > 0)
+    if not ok.any() or length[ok].sum() < 1e-3:
+        return None
+    return float(de[ok].sum() / length[ok].sum())
+
+
+def infill_density(fill: np.ndarray, line_width: float, area: float | None = None) -> float | None:
+    """Cura's infill density from its FILL lines (fraction).
+
+    Line patterns (lines, grid, triangles, ...) print families of parallel
+    lines; a family with spacing s adds ``line_width / s`` to the density.
+    When no clear families exist, ``length * line_width / area`` is used.
+
+    Parameters
+    ----------
+    fill : ndarray, shape (k, 2, 2)
+        FILL segments, mm.
+    line_width : float
+    area : float, optional
+        Infill area mm² for the fallback.
+    """
+    if len(fill) < 4:
+        return None
+    d = fill[:, 1] - fill[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    ang = np.mod(np.degrees(np.arctan2(d[:, 1], d[:, 0])), 180.0)
+    bins = np.round(ang / 2.0).astype(int) % 90
+    weight = np.bincount(bins, weights=length, minlength=90)
+    total = weight.sum()
+    # A direction can straddle two 2-degree bins: smooth, then take local maxima as families.
+    smooth = weight + np.roll(weight, 1) + np.roll(weight, -1)
+    peak = (smooth > 0.12 * total) & (smooth >= np.roll(smooth, 1)) & (smooth > np.roll(smooth, -1))
+    families = np.flatnonzero(peak)
+    density = 0.0
+    members = []
+    for fam in families:
+        delta = np.abs(np.mod(ang - 2.0 * fam + 90.0, 180.0) - 90.0)
+        members.append(delta <= 3.5)
+    covered = length[np.any(members, axis=0)].sum() / total if members and total > 0 else 0.0
+    ok = covered > 0.85 and 1 <= len(families) <= 4
+    if ok:
+        for sel in members:
+            theta = np.radians(np.average(ang[sel], weights=length[sel]))
+            normal = np.array([-np.sin(theta), np.cos(theta)])
+            mid = 0.5 * (fill[sel, 0] + fill[sel, 1])
+            off = np.unique(np.round(mid @ normal, 2))
+            gaps = np.diff(off)
+            gaps = gaps[gaps > 0.5 * line_width]
+            if gaps.size < 2:
+                ok = False
+                break
+            spacing = float(np.median(gaps))
+            density += line_width / spacing
+    if ok and 0.0 < density <= 1.0:
+        return float(density)
+    if area and area > 0:
+        return float(min(1.0, length.sum() * line_width / area))
+    return None

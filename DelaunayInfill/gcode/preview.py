@@ -1,0 +1,151 @@
+"""Top view of one layer coloured by line type (matplotlib, an optional extra)."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .area import segments_of
+from .read import TYPE_CODES, MachineState, RetractionModel, iter_file_chunks, parse_layer
+
+__all__ = ["layer_segments", "render_layer", "render_layers", "MATPLOTLIB_MISSING"]
+
+MATPLOTLIB_MISSING = "the preview needs matplotlib: pip install 'DelaunayInfill[plot]' (or pip install matplotlib)"
+
+# Colours close to Cura's "Line Type" scheme.
+_STYLE = {
+    "WALL-OUTER": ("#d62728", "outer wall"),
+    "WALL-INNER": ("#2ca02c", "inner wall"),
+    "SKIN": ("#e6c619", "skin"),
+    "FILL": ("#ff7f0e", "infill"),
+    "SUPPORT": ("#17becf", "support"),
+    "SUPPORT-INTERFACE": ("#1f77b4", "support interface"),
+    "SKIRT": ("#9edae5", "skirt/brim"),
+    "PRIME-TOWER": ("#8c564b", "prime tower"),
+}
+_NAMES = {v: k for k, v in TYPE_CODES.items()}
+
+
+def layer_segments(path, layer: int, *, occurrence: int = 0) -> dict[str, np.ndarray]:
+    """The moves of layer `layer` of a G-code file, grouped by line type.
+
+    Parameters
+    ----------
+    path : path-like
+    layer : int
+        The ``;LAYER:`` number.
+    occurrence : int
+        Which of several layers with that number (one-at-a-time printing).
+
+    Returns
+    -------
+    dict
+        Type name (``"FILL"``, ``"travel"``, ...) -> segments, shape (k, 2, 2), mm.
+
+    Raises
+    ------
+    ValueError
+        No such layer.
+    """
+    state, retraction = MachineState(), RetractionModel()
+    seen = 0
+    layers = []
+    with open(path, encoding="utf-8", errors="replace", newline="") as f:
+        for chunk in iter_file_chunks(f):
+            parse = parse_layer(chunk, state, retraction)
+            if parse.number is None:
+                continue
+            layers.append(parse.number)
+            if parse.number == layer:
+                if seen == occurrence:
+                    return _group(parse)
+                seen += 1
+    if not layers:
+        raise ValueError(f"{os.fspath(path)} has no ';LAYER:' lines")
+    raise ValueError(f"{os.fspath(path)} has no layer {layer} (layers {min(layers)}..{max(layers)})")
+
+
+def _group(parse) -> dict[str, np.ndarray]:
+    m = parse.moves
+    moved = (m["x1"] != m["x0"]) | (m["y1"] != m["y0"])
+    ok = moved & np.isfinite(m["x0"]) & np.isfinite(m["y0"])
+    extr = ok & (m["de"] > 0)
+    segs = segments_of(m, slice(None))
+    out = {"travel": segs[ok & ~extr]}
+    for code in np.unique(m["kind"][extr]):
+        out[_NAMES.get(int(code), "NONE")] = segs[extr & (m["kind"] == code)]
+    return out
+
+
+def _draw(ax, groups, title, line_width):
+    from matplotlib.collections import LineCollection
+
+    handles = []
+    if len(groups.get("travel", [])):
+        lc = LineCollection(groups["travel"], colors="#9a9a9a", linewidths=0.3, linestyles="dotted", label="travel")
+        ax.add_collection(lc)
+        handles.append(lc)
+    for name, (colour, label) in _STYLE.items():
+        segs = groups.get(name)
+        if segs is None or not len(segs):
+            continue
+        lc = LineCollection(segs, colors=colour, linewidths=line_width, capstyle="round", label=label)
+        ax.add_collection(lc)
+        handles.append(lc)
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.set_title(title, fontsize=10)
+    ax.set_xlabel("X (mm)")
+    ax.set_ylabel("Y (mm)")
+    return handles
+
+
+def render_layers(panels, out_path, *, dpi: int = 150, line_width: float = 1.0) -> str:
+    """Draw one or more layer views side by side into a PNG.
+
+    Parameters
+    ----------
+    panels : sequence of (groups, title)
+        `layer_segments` results with their titles.
+    out_path : path-like
+
+    Returns
+    -------
+    str
+        The written path.
+
+    Raises
+    ------
+    ImportError
+        matplotlib is not installed (message: `MATPLOTLIB_MISSING`).
+    """
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(MATPLOTLIB_MISSING) from exc
+    fig, axes = plt.subplots(1, len(panels), figsize=(6.4 * len(panels), 6.4), squeeze=False)
+    handles = []
+    for ax, (groups, title) in zip(axes[0], panels, strict=True):
+        handles = _draw(ax, groups, title, line_width) or handles
+    by_label = {h.get_label(): h for ax in axes[0] for h in ax.collections}
+    fig.legend(by_label.values(), by_label.keys(), loc="lower center", ncol=min(7, len(by_label)), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    out_path = os.fspath(out_path)
+    tmp = out_path + ".tmp.png"
+    fig.savefig(tmp, dpi=dpi)
+    plt.close(fig)
+    os.replace(tmp, out_path)
+    return out_path
+
+
+def render_layer(path, layer: int, out_path, *, before=None, occurrence: int = 0, dpi: int = 150) -> str:
+    """PNG top view of one layer; with `before`, the original on the left for comparison."""
+    panels = []
+    if before is not None:
+        panels.append((layer_segments(before, layer, occurrence=occurrence), f"{os.path.basename(os.fspath(before))} — layer {layer}"))
+    panels.append((layer_segments(path, layer, occurrence=occurrence), f"{os.path.basename(os.fspath(path))} — layer {layer}"))
+    return render_layers(panels, out_path, dpi=dpi)

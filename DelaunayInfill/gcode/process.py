@@ -1,0 +1,987 @@
+"""``process_gcode`` and ``process_file``: Cura's FILL replaced by Delaunay infill.
+
+Two passes over the chunks (one per ``;LAYER:``): a cheap survey (validity,
+each mesh's footprint), then the rewrite, one chunk at a time, so a file is
+never held in memory whole.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import re
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..geometry import contains_xy, to_multipolygon, unary_union
+from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of, split_by_lines
+from .emit import EmitParams, emit_block
+from .estimate import move_times, moves_time
+from .infer import e_per_mm, infill_density, wall_line_width
+from .read import (
+    FILL,
+    MARKER,
+    GCodeError,
+    HeaderInfo,
+    LayerParse,
+    MachineState,
+    ProcessCancelled,
+    RetractionModel,
+    check_cura_gcode,
+    iter_chunks,
+    iter_file_chunks,
+    parse_layer,
+)
+from .settings import MeshSettings, ProcessReport, ProcessSettings, Region, RegionReport
+
+__all__ = [
+    "process_gcode",
+    "process_file",
+    "ProcessSettings",
+    "MeshSettings",
+    "Region",
+    "ProcessReport",
+    "GCodeError",
+    "ProcessCancelled",
+]
+
+_TIME_ELAPSED = re.compile(r"^;TIME_ELAPSED:(-?[\d.]+)", re.M)
+_M204 = re.compile(r"^M204 [^\n;]*?S(\d+\.?\d*)", re.M)
+_DEFAULT_LINE_WIDTH = 0.4
+
+
+# ----------------------------------------------------------------------------- survey
+@dataclass
+class Survey:
+    """First pass (cheap): validity facts and totals needed before the rewrite."""
+
+    first_chunk: str = ""
+    last_chunk: str = ""
+    layer_chunks: int = 0
+    acceleration: float | None = None
+    last_time_elapsed: float | None = None
+
+    def add(self, text: str, index: int) -> None:
+        if index == 0:
+            self.first_chunk = text
+        self.last_chunk = text
+        if text.startswith(";LAYER:"):
+            self.layer_chunks += 1
+        if self.acceleration is None:
+            m = _M204.search(text)
+            if m:
+                self.acceleration = float(m.group(1))
+        at = text.rfind(";TIME_ELAPSED:")
+        if at >= 0:
+            m = _TIME_ELAPSED.match(text, at)
+            if m:
+                self.last_time_elapsed = float(m.group(1))
+
+
+# ----------------------------------------------------------------------------- patterns
+def _build_pattern(footprint, density, line_width, regions, settings: ProcessSettings):
+    from ..pattern import InfillPattern
+
+    return InfillPattern.build(
+        footprint,
+        density,
+        line_width,
+        regions=[(a, d) for a, d, _ in regions],
+        seed=settings.seed,
+        layout=settings.layout,
+        calibration=settings.calibration,
+        relax=settings.relax,
+        feather=settings.feather,
+    )
+
+
+class PatternCache:
+    """Patterns per (mesh, density, line width), reused while they still fit.
+
+    A cached pattern is reused for a layer when its footprint covers the
+    layer's infill area and its density regions match the layer's: a region
+    matches when the symmetric difference is below 2 % of its area or half a
+    line width along its perimeter, whichever is larger.  Otherwise a new
+    pattern is built over the union of the old footprint and the new area, so
+    a part that stays the same or shrinks upwards uses one pattern for all its
+    layers (its infill stacks), and the pattern is calibrated on the area that
+    is really printed.
+    """
+
+    def __init__(self, settings: ProcessSettings, per_key: int = 6):
+        self.settings = settings
+        self.per_key = per_key
+        self.entries: dict[tuple, list[tuple[object, list, object]]] = {}
+        self.builds = 0
+        self._covered: dict[int, object] = {}  # id(footprint) -> last area found inside it
+
+    @staticmethod
+    def _same(a, b, line_width: float) -> bool:
+        if abs(a.area - b.area) > 0.5 * max(a.area, b.area) + 1e-9:
+            return False
+        tol = max(0.02 * max(a.area, b.area), 0.5 * line_width * max(a.length, b.length), 1e-6)
+        return a.symmetric_difference(b).area <= tol
+
+    def _regions_match(self, cached: list, regions: list, line_width: float) -> bool:
+        return len(cached) == len(regions) and all(
+            abs(cd - d) < 1e-6 and self._same(ca, a, line_width)
+            for (ca, cd, _), (a, d, _) in zip(cached, regions, strict=True)
+        )
+
+    def get(self, mesh: str, area, density: float, line_width: float, regions: list):
+        """A pattern whose footprint covers `area`; returns (pattern, footprint, regions used)."""
+        key = (mesh, round(density, 4), round(line_width, 3), round(self.settings.feather, 3))
+        bucket = self.entries.setdefault(key, [])
+        grow_from = None
+        for i, (footprint, cached_regions, pattern) in enumerate(bucket):
+            if not self._regions_match(cached_regions, regions, line_width):
+                continue
+            if self._covered.get(id(footprint)) is area:  # the same area object fitted last time
+                bucket.insert(0, bucket.pop(i))
+                return pattern, footprint, cached_regions
+            outside = area.difference(footprint).area
+            if outside <= max(1e-6, 0.25 * line_width * area.length):
+                self._covered[id(footprint)] = area
+                bucket.insert(0, bucket.pop(i))
+                return pattern, footprint, cached_regions
+            if grow_from is None:
+                grow_from = footprint
+        footprint = area if grow_from is None else unary_union([grow_from, area])
+        footprint = to_multipolygon(footprint.buffer(line_width, 4))
+        pattern = _build_pattern(footprint, density, line_width, regions, self.settings)
+        self.builds += 1
+        bucket.insert(0, (footprint, regions, pattern))
+        del bucket[self.per_key :]
+        return pattern, footprint, regions
+
+
+def _split_empty_regions(regions: list) -> tuple[list, object, list]:
+    """Separate 0 % regions ("no infill there") from the density regions.
+
+    Parameters
+    ----------
+    regions : list of (MultiPolygon, float, str)
+        (area, density fraction, name) in order; later regions win where they overlap.
+
+    Returns
+    -------
+    (list, MultiPolygon or None, list)
+        The regions with density > 0 (same order); the area with no infill
+        (each 0 % region minus the later regions that overlap it), None when
+        there is none; and (part, name) of each 0 % region for the report.
+    """
+    if all(d > 0.0 for _, d, _ in regions):
+        return regions, None, []
+    kept, parts = [], []
+    for k, (a, d, name) in enumerate(regions):
+        if d > 0.0:
+            kept.append((a, d, name))
+            continue
+        later = [b for b, dd, _ in regions[k + 1 :] if dd > 0.0]
+        part = to_multipolygon(a.difference(unary_union(later))) if later else a
+        if not part.is_empty:
+            parts.append((part, name))
+    empty = to_multipolygon(unary_union([p for p, _ in parts])) if parts else None
+    return kept, empty, parts
+
+
+# ----------------------------------------------------------------------------- the run
+@dataclass
+class _RegionTally:
+    target: float
+    length: float = 0.0
+    area: float = 0.0
+
+
+class _Run:
+    def __init__(
+        self,
+        settings: ProcessSettings,
+        regions: Sequence[Region],
+        info: HeaderInfo,
+        survey: Survey,
+    ):
+        self.s = settings
+        self.user_regions = list(regions)
+        self.info = info
+        self.survey = survey
+        self.state = MachineState()
+        self.retraction = RetractionModel()
+        self.report = ProcessReport(volumetric=info.volumetric)
+        self.patterns = PatternCache(settings)
+        self.area_cache = AreaCache()
+        self.mesh_lw: dict[str, float] = {}
+        self.mesh_density: dict[str, float] = {}
+        self.region_density: dict[str, float] = {}
+        self.tally: dict[str, _RegionTally] = {}
+        self.zone_areas: dict[tuple, tuple] = {}
+        self.clips: dict[tuple, object] = {}
+        self.result_memo: dict[int, tuple] = {}
+        self.cura_density: dict[str, float] = {}
+        self.modifier_areas: dict[tuple, object] = {}
+        self.xy_words: dict[int, tuple] = {}
+        self.e_before: dict[int, float] = {}
+        self.e_delta: dict[int, float] = {}
+        self.time_delta = 0.0
+        self.acceleration = survey.acceleration or settings.acceleration
+        self.prev_z: float | None = None
+        self.lw_warned = False
+        self.any_lw: float | None = None
+
+    # ------------------------------------------------------------------ helpers
+    def _line_width(self, parse: LayerParse, mesh: str) -> float:
+        ms = self.s.mesh(mesh)
+        if ms is not None and ms.line_width:
+            return ms.line_width
+        if self.s.line_width:
+            return self.s.line_width
+        lw = self.mesh_lw.get(mesh)
+        if lw is not None:
+            return lw
+        w = wall_line_width(parse, mesh)
+        if w is not None:
+            # The first layer may use its own (wider) line width: remember only later layers.
+            if parse.number is not None and parse.number >= 1:
+                self.mesh_lw[mesh] = w
+            self.any_lw = self.any_lw or w
+            return w
+        if self.mesh_lw:
+            return next(iter(self.mesh_lw.values()))
+        if self.any_lw is None:
+            for other in parse.meshes:
+                w = wall_line_width(parse, other) if other != mesh else None
+                if w is not None:
+                    self.any_lw = w
+                    break
+        if self.any_lw is not None:
+            return self.any_lw
+        if not self.lw_warned:
+            self.report.warnings.append(f"line width not found from walls; using {_DEFAULT_LINE_WIDTH} mm (give --line-width)")
+            self.lw_warned = True
+        return _DEFAULT_LINE_WIDTH
+
+    def _retraction(self) -> RetractionModel:
+        r = RetractionModel(**vars(self.retraction))
+        s = self.s
+        if s.retraction_amount is not None:
+            r.amount = s.retraction_amount
+            r.seen = r.seen or s.retraction_amount > 0
+        if s.retraction_retract_speed is not None:
+            r.retract_f = s.retraction_retract_speed * 60
+        if s.retraction_prime_speed is not None:
+            r.prime_f = s.retraction_prime_speed * 60
+        if s.retraction_hop is not None:
+            r.hop = s.retraction_hop
+        if s.firmware_retraction is not None:
+            r.firmware = s.firmware_retraction
+        return r
+
+    def _tally(self, name: str, target: float, length: float, area: float) -> None:
+        t = self.tally.get(name)
+        if t is None:
+            t = self.tally[name] = _RegionTally(target)
+        t.length += length
+        t.area += area
+
+    # ------------------------------------------------------------------ per chunk
+    def process_chunk(self, text: str) -> str:
+        parse = parse_layer(text, self.state, self.retraction)
+        m = parse.moves
+        moved = (m["x1"] != m["x0"]) | (m["y1"] != m["y0"])
+        extr = moved & (m["de"] > 0)
+        # Net E per extruder (retractions and primes included): what Cura's filament figure counts.
+        has_e = m["de"] != 0
+        for ext in np.unique(m["ext"][has_e]) if has_e.any() else []:
+            self.e_before[int(ext)] = self.e_before.get(int(ext), 0.0) + float(m["de"][has_e & (m["ext"] == ext)].sum())
+        fill_len = np.hypot(m["x1"] - m["x0"], m["y1"] - m["y0"])[extr & (m["kind"] == FILL)].sum()
+        self.report.infill_before_mm += float(fill_len)
+        self.report.infill_after_mm += float(fill_len)
+        lines = parse.lines
+        changed = False
+        if parse.number is not None:
+            self.report.layers_total += 1
+            todo = [b for b in parse.blocks if b.has_moves and self.s.enabled(b.mesh)]
+            if not todo:
+                self.report.layers_kept += 1
+            else:
+                try:
+                    new_lines, dt, stats = self._layer(parse)
+                except ProcessCancelled:
+                    raise
+                except Exception as exc:  # a failing layer keeps Cura's infill
+                    self.report.failed_layers.append(parse.number)
+                    self.report.failure_messages.append(f"layer {parse.number}: {type(exc).__name__}: {exc}")
+                else:
+                    for key, value in stats.items():
+                        setattr(self.report, key, getattr(self.report, key) + value)
+                    if new_lines is None:
+                        self.report.layers_kept += 1
+                    else:
+                        self.report.layers_processed += 1
+                        lines = new_lines
+                        changed = True
+                        self.time_delta += dt
+            self.prev_z = parse.z
+        if parse.time_elapsed_lines and self.time_delta != 0.0:
+            if not changed:
+                lines = list(lines)
+            for i in parse.time_elapsed_lines if not changed else _time_lines(lines):
+                old = float(lines[i][14:].strip() or 0)
+                lines[i] = f";TIME_ELAPSED:{old + self.time_delta:.6f}"
+            changed = True
+        return "\n".join(lines) if changed else text
+
+    def _slice_z(self, z: float) -> float:
+        h = None
+        if self.prev_z is not None and 0 < z - self.prev_z < 2.0:
+            h = z - self.prev_z
+        if h is None:
+            h = self.info.layer_height or min(z, 0.2)
+        return z - h / 2
+
+    def _density_of(self, mesh: str, fill: np.ndarray, lw: float, area) -> float:
+        ms = self.s.mesh(mesh)
+        if ms is not None and ms.density is not None:
+            return ms.density
+        if self.s.density is not None:
+            return self.s.density
+        d = self.mesh_density.get(mesh)
+        if d is None:
+            d = infill_density(fill, lw, area.area if area is not None else None)
+            if d is None:
+                return 0.2
+            if len(fill) >= 12:
+                self.mesh_density[mesh] = d
+        return d
+
+    def _region_mesh_density(self, mesh: str, fill: np.ndarray, lw: float, area) -> float:
+        ms = self.s.mesh(mesh)
+        if ms is not None and ms.region_density is not None:
+            return ms.region_density
+        if ms is not None and ms.density is not None:
+            return ms.density
+        d = self.region_density.get(mesh)
+        if d is None:
+            d = infill_density(fill, lw, area.area if area is not None else None) or 0.2
+            if len(fill) >= 12:
+                self.region_density[mesh] = d
+        return d
+
+    def _layer(self, parse: LayerParse):
+        s = self.s
+        m = parse.moves
+        moved = (m["x1"] != m["x0"]) | (m["y1"] != m["y0"])
+        extr = moved & (m["de"] > 0)
+        blocks = parse.blocks
+        fill_meshes: list[str] = []
+        for b in blocks:
+            if b.has_moves and b.mesh not in fill_meshes:
+                fill_meshes.append(b.mesh)
+        geo = {}
+        lw_of = {}
+        for name in fill_meshes:
+            lw = self._line_width(parse, name)
+            lw_of[name] = lw
+            ms = s.mesh(name)
+            overlap = ms.infill_overlap if ms is not None and ms.infill_overlap is not None else s.infill_overlap
+            if overlap is None:
+                overlap = 0.1 * lw
+            guess = self.mesh_density.get(name) or self.region_density.get(name)
+            if guess is None:
+                # Cura's own density of this mesh sets how far apart its FILL lines are.
+                fill_now = parse.moves
+                sel = parse.mesh_mask(name) & (fill_now["kind"] == FILL) & (fill_now["de"] > 0)
+                segs = segments_of(fill_now, sel)
+                guess = infill_density(segs, lw) or 0.2
+            reach = min(25.0, max(2 * lw, 1.5 * lw / max(guess, 0.04)))
+            geo[name] = mesh_layer(parse, name, lw, overlap, reach, self.area_cache)
+
+        # Which meshes are density regions inside another (Cura infill_mesh modifiers)?
+        hosts = [n for n in fill_meshes if s.enabled(n) and geo[n].has_walls and geo[n].part is not None]
+        parent_of: dict[str, str] = {}
+        for name in fill_meshes:
+            ms = s.mesh(name)
+            explicit = ms is not None and ms.region_density is not None
+            if geo[name].has_walls and not explicit:
+                continue
+            for host in hosts:
+                if host == name:
+                    continue
+                if fraction_inside(geo[name].fill, geo[host].part.buffer(lw_of[host]), lw_of[host]) >= 0.9:
+                    parent_of[name] = host
+                    break
+        normal = [n for n in fill_meshes if s.enabled(n) and n not in parent_of]
+        if not normal:
+            return None, 0.0, {}
+
+        z_slice = self._slice_z(parse.z)
+        replaced: dict[int, list[str]] = {}
+        stats = {"blocks_replaced": 0, "blocks_kept": 0, "infill_travel_mm": 0.0, "infill_retractions": 0}
+        dt = 0.0
+        retraction = self._retraction()
+        for name in normal:
+            g = geo[name]
+            lw = lw_of[name]
+            children = [c for c, p in parent_of.items() if p == name]
+            area = g.area
+            region_list = []
+            for k, r in enumerate(self.user_regions):
+                a = r.at(z_slice)
+                if not a.is_empty:
+                    region_list.append((a, r.density, r.name or f"region {k + 1}"))
+            child_areas = []
+            covered_children = set()  # modifiers whose area the host's pattern fills
+            given = {r[2] for r in region_list}
+            for c, ca in zip(children, self._modifier_areas(name, children, geo, lw) if children else [], strict=True):
+                if ca.is_empty:
+                    continue
+                covered_children.add(c)
+                if c in given or c.replace("\\", "/").rsplit("/", 1)[-1] in given:
+                    # the caller gave this modifier's exact mesh as a Region: keep that one only
+                    child_areas.append(ca)
+                    continue
+                child_areas.append(ca)
+                region_list.append((ca, self._region_mesh_density(c, geo[c].fill, lw_of[c], ca), f"mesh {c}"))
+            if child_areas:
+                area = to_multipolygon(unary_union([area, *child_areas]))
+            if area.is_empty:
+                continue
+            density = self._density_of(name, g.fill, lw, area)
+            if density <= 0.0:
+                continue  # a 0 % mesh has no infill (Cura made none)
+            # 0 % regions are "no infill there": cut out of the area, not given to the engine
+            full_area = area
+            region_list, empty, empty_parts = _split_empty_regions(region_list)
+            if empty is not None:
+                area = to_multipolygon(area.difference(empty))
+            my_blocks = [i for i, b in enumerate(blocks) if b.has_moves and (b.mesh == name or b.mesh in children)]
+            if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
+                paths, used_regions = [], []
+            else:
+                pattern, footprint, used_regions = self.patterns.get(name, area, density, lw, region_list)
+                first = blocks[my_blocks[0]].before
+                start = (first.x, first.y) if math.isfinite(first.x) else None
+                result = self._clip(pattern, area, start)
+                paths = self._paths(result)
+                self._measure(result, paths, area, density, used_regions, lw)
+            for part, zname in empty_parts:
+                self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
+            # Each new path goes to the Cura FILL block nearest to its start.
+            fill_segments = np.concatenate([geo[n].fill for n in [name, *children]]) if any(len(geo[n].fill) for n in [name, *children]) else np.zeros((0, 2, 2))
+            fill_owner = np.concatenate([geo[n].fill_block for n in [name, *children]]) if len(fill_segments) else np.zeros(0, dtype=int)
+            assigned: dict[int, list[np.ndarray]] = {i: [] for i in my_blocks}
+            if paths and len(my_blocks) == 1:
+                assigned[my_blocks[0]] = list(paths)
+            elif paths and len(fill_segments):
+                pts = sample_segments(fill_segments, max(lw, 0.5))
+                d = fill_segments[:, 1] - fill_segments[:, 0]
+                n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / max(lw, 0.5)).astype(np.int64)) + 1
+                owner = np.repeat(fill_owner, n)
+                _, nearest = cKDTree(pts).query(np.array([p[0] for p in paths]))
+                for p, blk in zip(paths, owner[nearest], strict=True):
+                    assigned.setdefault(int(blk), []).append(p)
+            elif paths:
+                assigned[my_blocks[0]] = paths
+            travel_part = g.part if g.part is not None else area.buffer(lw / 2)
+            # A block that got no new path keeps Cura's infill only where the new pattern leaves a gap.
+            reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
+            new_tree = None
+            for bi in my_blocks:
+                blk = blocks[bi]
+                mask = (m["block"] == bi)
+                had_fill = bool((mask & extr).any())
+                new_paths = assigned.get(bi, [])
+                if had_fill and not new_paths and paths and blk.mesh in covered_children:
+                    # The host's seamless pattern fills this modifier's area (its paths went to
+                    # nearer blocks): keeping Cura's lines here would print the region twice.
+                    had_fill = False
+                elif not blk.unsupported and not new_paths and had_fill and (paths or empty is not None):
+                    probe = sample_segments(segments_of(m, mask & extr), 2.0)
+                    covered = np.zeros(len(probe), dtype=bool)
+                    if paths:
+                        if new_tree is None:
+                            new_tree = cKDTree(np.concatenate([sample_segments(np.stack([p[:-1], p[1:]], axis=1), lw) for p in paths]))
+                        covered |= new_tree.query(probe)[0] <= reach
+                    if empty is not None:  # places of a 0 % region need no infill
+                        covered |= contains_xy(empty, probe[:, 0], probe[:, 1])
+                    had_fill = float(covered.mean()) < 0.9
+                if blk.unsupported or (not new_paths and had_fill):
+                    stats["blocks_kept"] += 1
+                    continue
+                epm = e_per_mm(parse, mask & extr)
+                if epm is None:
+                    epm = e_per_mm(parse, extr & (m["kind"] == FILL) & parse.mesh_mask(blk.mesh))
+                if epm is None:
+                    epm = e_per_mm(parse, extr & (m["kind"] == FILL))
+                if epm is None:
+                    if new_paths:
+                        stats["blocks_kept"] += 1
+                        continue
+                    epm = 0.0
+                ms = s.mesh(blk.mesh)
+                speed = ms.speed if ms is not None and ms.speed else s.speed
+                if speed:
+                    print_f = speed * 60.0
+                elif had_fill:
+                    print_f = float(m["f"][mask & extr][0])
+                else:
+                    fills = m["f"][extr & (m["kind"] == FILL)]
+                    print_f = float(fills[0]) if fills.size else blk.before.f
+                g0 = m["f"][mask & ~extr & moved]
+                travel_f = s.travel_speed * 60.0 if s.travel_speed else (retraction.travel_f or (float(g0.max()) if g0.size else 9000.0))
+                params = EmitParams(
+                    e_per_mm=epm * s.flow,
+                    print_f=print_f,
+                    travel_f=travel_f,
+                    retraction=retraction,
+                    part=travel_part,
+                    min_travel=s.retraction_min_travel if s.retraction_min_travel is not None else 2 * lw,
+                    step=max(lw / 2, 0.1),
+                    layer_z=parse.z,
+                    xy_words=self.xy_words,
+                )
+                out = emit_block(new_paths, blk.before, blk.after, params, blk.extra_lines)
+                replaced[bi] = out.lines
+                old_t = moves_time(
+                    m["x1"][mask] - m["x0"][mask], m["y1"][mask] - m["y0"][mask], m["z1"][mask] - m["z0"][mask],
+                    m["de"][mask], m["f"][mask], self.acceleration,
+                )
+                new_t = float(move_times(np.concatenate(out.dist), np.concatenate(out.feed), self.acceleration).sum()) if out.dist else 0.0
+                dt += new_t - old_t
+                # Net change of the filament used: every E move of the new block minus those of Cura's.
+                old_net = float(m["de"][mask].sum())  # not after.e - before.e: Cura may G92 E0 inside
+                self.e_delta[blk.extruder] = self.e_delta.get(blk.extruder, 0.0) + out.net_e - old_net
+                old_len = float(np.hypot(m["x1"] - m["x0"], m["y1"] - m["y0"])[mask & extr & (m["kind"] == FILL)].sum())
+                self.report.infill_after_mm += out.extrude_mm - old_len
+                stats["blocks_replaced"] += 1
+                stats["infill_travel_mm"] += out.travel_mm
+                stats["infill_retractions"] += out.retractions
+        if not replaced:
+            return None, 0.0, {"blocks_kept": stats["blocks_kept"]}
+        if not math.isfinite(dt):
+            raise ValueError("the print-time estimate of the new moves is not finite")
+        lines = parse.lines
+        out_lines: list[str] = []
+        pos = 0
+        for bi in sorted(replaced, key=lambda i: blocks[i].start):
+            blk = blocks[bi]
+            out_lines.extend(lines[pos : blk.start + 1])
+            out_lines.extend(replaced[bi])
+            pos = blk.stop
+        out_lines.extend(lines[pos:])
+        return out_lines, dt, stats
+
+    def _cura_density(self, mesh: str, fill: np.ndarray, lw: float) -> float:
+        """Cura's own density of a mesh (from its FILL spacing), remembered."""
+        d = self.cura_density.get(mesh)
+        if d is None:
+            d = infill_density(fill, lw) or 0.2
+            if len(fill) >= 12:
+                self.cura_density[mesh] = d
+        return d
+
+    def _modifier_areas(self, host: str, children: list[str], geo: dict, lw: float) -> list:
+        """Areas of a host's infill-mesh modifiers in this layer (one split of the host's area)."""
+        names = [host, *children]
+        h = hashlib.blake2b(digest_size=16)
+        for n in names:
+            h.update(n.encode() + b"|" + np.round(geo[n].fill, 3).tobytes() + b"|")
+        key = h.digest()
+        hit = self.modifier_areas.get(key)
+        if hit is not None:
+            return hit
+        host_geo = geo[host]
+        area = to_multipolygon(unary_union([host_geo.area, *(geo[c].area for c in children)]))
+        if host_geo.part is not None:
+            area = to_multipolygon(area.intersection(host_geo.part.buffer(lw / 2, 4)))
+        spacings = [lw / self._cura_density(n, geo[n].fill, lw) for n in names]
+        parts = split_by_lines(area, [geo[n].fill for n in names], spacings, step=max(lw, 0.25))[1:]
+        if len(self.modifier_areas) > 64:
+            self.modifier_areas.clear()
+        self.modifier_areas[key] = parts
+        return parts
+
+    def _clip(self, pattern, area, start):
+        """`pattern.clip`, remembered: a prism's layers clip the same area from the same nozzle position."""
+        key = (id(pattern), round(area.area, 6), round(area.length, 6), area.bounds,
+               None if start is None else (round(start[0], 2), round(start[1], 2)))
+        hit = self.clips.get(key)
+        if hit is None or hit[0] is not pattern:  # ids are reused once a pattern is freed
+            hit = (pattern, pattern.clip(area, start=start))
+            if len(self.clips) >= 8:
+                self.clips.pop(next(iter(self.clips)))
+            self.clips[key] = hit
+        return hit[1]
+
+    def _paths(self, result) -> list[np.ndarray]:
+        """The result's paths as float arrays, the same objects for a remembered clip result."""
+        hit = self.result_memo.get(id(result))
+        if hit is None or hit[0] is not result:
+            hit = (result, [np.asarray(p, dtype=float) for p in result.paths if len(p) >= 2], {})
+            if len(self.result_memo) >= 16:
+                self.result_memo.pop(next(iter(self.result_memo)))
+            self.result_memo[id(result)] = hit
+        return hit[1]
+
+    def _zone_lengths(self, result, paths, regions, lw) -> np.ndarray:
+        """New infill length per zone (index k: regions[k], last: base), remembered per clip result."""
+        memo = self.result_memo[id(result)][2]
+        key = (tuple(id(r) for r in regions), lw)
+        hit = memo.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], regions, strict=True)):
+            return hit[1]
+        segs = np.concatenate([np.stack([p[:-1], p[1:]], axis=1) for p in paths])
+        step = max(lw / 2, 0.1)
+        d = segs[:, 1] - segs[:, 0]
+        seg_len = np.hypot(d[:, 0], d[:, 1])
+        n = np.maximum(1, np.ceil(seg_len / step).astype(np.int64)) + 1
+        pts = sample_segments(segs, step)
+        weight = np.repeat(seg_len / n, n)
+        owner = np.full(len(pts), len(regions))
+        for k, (a, _, _) in enumerate(regions):
+            owner[contains_xy(a, pts[:, 0], pts[:, 1])] = k
+        lengths = np.bincount(owner, weights=weight, minlength=len(regions) + 1)
+        memo[key] = (list(regions), lengths)
+        return lengths
+
+    def _measure(self, result, paths, area, base_density, regions, lw) -> None:
+        """Accumulate new infill length x line width and area per density region (later regions win)."""
+        if not paths:
+            return
+        lengths = self._zone_lengths(result, paths, regions, lw)
+        # Zone areas repeat layer after layer (prisms): cache them by a fingerprint of the inputs.
+        key = (round(area.area, 6), round(area.length, 6), area.bounds, tuple(id(r) for r in regions))
+        hit = self.zone_areas.get(key)
+        areas = hit[1] if hit is not None and all(a is b for a, b in zip(hit[0], regions, strict=True)) else None
+        if areas is None:
+            areas = [0.0] * len(regions)
+            later = None
+            for k in range(len(regions) - 1, -1, -1):
+                a = regions[k][0]
+                own = a.intersection(area)
+                if later is not None:
+                    own = own.difference(later)
+                later = a if later is None else later.union(a)
+                areas[k] = own.area
+            base_area = area.difference(later).area if later is not None else area.area
+            areas = (areas, base_area)
+            if len(self.zone_areas) > 256:
+                self.zone_areas.clear()
+            self.zone_areas[key] = ([r for r in regions], areas)  # holding them keeps the ids valid
+        areas, base_area = areas
+        for k, (_, dens, name) in enumerate(regions):
+            self._tally(name, dens, float(lengths[k]) * lw, areas[k])
+        self._tally("base", base_density, float(lengths[-1]) * lw, base_area)
+
+    # ------------------------------------------------------------------ header
+    def finish(self, header: str) -> str:
+        r = self.report
+        before = sum(self.e_before.values())
+        r.filament_before_mm = before
+        r.filament_after_mm = before + sum(self.e_delta.values())
+        r.time_before_s = self.survey.last_time_elapsed or 0.0
+        r.time_after_s = r.time_before_s + self.time_delta
+        names = ["base", *[n for n in self.tally if n != "base"]]
+        for name in names:
+            t = self.tally.get(name)
+            if t is None or (name == "base" and t.area <= 1e-6 and len(self.tally) > 1):
+                continue  # regions tile the whole part: no base zone to report
+            measured = t.length / t.area if t.area > 1e-9 else float("nan")
+            r.regions.append(RegionReport(name, t.target, measured, t.area))
+        return patch_header(header, self.time_delta, self.e_before, self.e_delta, self.s, volumetric=self.info.volumetric)
+
+
+def _time_lines(lines: list[str]) -> list[int]:
+    return [i for i, line in enumerate(lines) if line.startswith(";TIME_ELAPSED:")]
+
+
+def _filament_area(settings: ProcessSettings) -> float | None:
+    """Cross-section of the filament, mm², when its diameter is known."""
+    d = settings.filament_diameter
+    return math.pi * d * d / 4.0 if d else None
+
+
+def _add_delta(value: float, ext: int, e_net: dict, e_delta: dict, per_e: float | None) -> float:
+    """A header figure plus the net change of extrusion of extruder `ext`.
+
+    `per_e` converts E units to the figure's unit; None: the figure's own ratio
+    to the file's net E (Cura's conversion, read back from its numbers).
+    """
+    delta = e_delta.get(ext, 0.0)
+    if per_e is None:
+        net = e_net.get(ext, 0.0)
+        if net <= 0:
+            return value
+        per_e = value / net
+    return value + delta * per_e
+
+
+def patch_header(
+    header: str,
+    time_delta: float,
+    e_net: dict,
+    e_delta: dict,
+    settings: ProcessSettings,
+    volumetric: bool = False,
+) -> str:
+    """Header with updated time and filament figures and the processed marker.
+
+    Parameters
+    ----------
+    header : str
+        Cura's header chunk.
+    time_delta : float
+        s added to the print time.
+    e_net, e_delta : dict[int, float]
+        Per extruder: the input's net E and the net change made (E units:
+        mm of filament, mm³ when `volumetric`).
+    settings : ProcessSettings
+        For the filament diameter and the marker.
+    volumetric : bool
+        E is mm³ (UltiGCode, RepRap volumetric).
+
+    Notes
+    -----
+    Each figure becomes Cura's figure plus the net change in extrusion (new
+    minus old), so it stays consistent with the file's net E: metres of
+    filament get delta / 1000 (non-volumetric), mm³ get delta (volumetric) or
+    delta × filament area; without a known conversion the figure's own ratio
+    to the file's net E is used.
+    """
+    area = _filament_area(settings)
+    to_m = None if volumetric else 1e-3
+    if volumetric and area:
+        to_m = 1e-3 / area
+    to_mm3 = 1.0 if volumetric else area
+
+    def time_sub(mo):
+        return f"{mo.group(1)}{max(0, int(round(float(mo.group(2)) + time_delta)))}"
+
+    header = re.sub(r"^(;TIME:)(\d+(?:\.\d+)?)", time_sub, header, count=1, flags=re.M)
+    header = re.sub(r"^(;PRINT\.TIME:)(\d+(?:\.\d+)?)", time_sub, header, count=1, flags=re.M)
+
+    def filament_sub(mo):
+        items = mo.group(2).split(",")
+        out = []
+        for ext, item in enumerate(items):
+            im = re.match(r"\s*(-?[\d.]+)(\D*)$", item)
+            if not im:
+                out.append(item)
+                continue
+            per_e = to_m if im.group(2).strip() == "m" else None
+            val = max(0.0, _add_delta(float(im.group(1)), ext, e_net, e_delta, per_e))
+            lead = item[: len(item) - len(item.lstrip())]
+            out.append(f"{lead}{val:.5g}{im.group(2)}")
+        return mo.group(1) + ",".join(out)
+
+    header = re.sub(r"^(;Filament used:)(.*)$", filament_sub, header, count=1, flags=re.M)
+
+    def volume_sub(mo):
+        ext = int(mo.group(2))
+        val = max(0.0, _add_delta(float(mo.group(4)), ext, e_net, e_delta, to_mm3))
+        return f"{mo.group(1)}{ext}{mo.group(3)}{val:.0f}"
+
+    header = re.sub(r"^(;EXTRUDER_TRAIN\.)(\d+)(\.MATERIAL\.VOLUME_USED:)([\d.]+)", volume_sub, header, flags=re.M)
+
+    def ulti_sub(mo):  # UltiGCode: ;MATERIAL: (extruder 0) and ;MATERIAL2: (extruder 1), mm³
+        ext = 1 if mo.group(2) else 0
+        return f"{mo.group(1)}{max(0.0, _add_delta(float(mo.group(3)), ext, e_net, e_delta, to_mm3)):.0f}"
+
+    header = re.sub(r"^(;MATERIAL(2?):)([\d.]+)", ulti_sub, header, flags=re.M)
+    from .. import __version__
+
+    marker = (
+        f"{MARKER} version={__version__} layout={settings.layout} seed={settings.seed}"
+        + (f" density={settings.density * 100:g}%" if settings.density is not None else "")
+    )
+    m = re.search(r"^;Generated with", header, re.M)
+    if m:
+        return header[: m.start()] + marker + "\n" + header[m.start() :]
+    if header and not header.endswith("\n"):
+        header += "\n"
+    return header + marker + "\n"
+
+
+def _umask() -> int:
+    """The process umask (read by setting and restoring it)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+# ----------------------------------------------------------------------------- API
+def _check_regions(regions) -> list[Region]:
+    out = []
+    for r in regions or ():
+        if not isinstance(r, Region):
+            raise TypeError(f"regions must be DelaunayInfill.gcode.Region objects, got {type(r).__name__}")
+        out.append(r)
+    return out
+
+
+def process_gcode(
+    layers: Sequence[str],
+    settings: ProcessSettings | None = None,
+    *,
+    regions: Iterable[Region] = (),
+    progress: Callable[[float], None] | None = None,
+    cancel: Callable[[], bool] | None = None,
+) -> tuple[list[str], ProcessReport]:
+    """Replace Cura's sparse infill in Cura's in-memory G-code list.
+
+    Parameters
+    ----------
+    layers : sequence of str
+        ``scene.gcode_dict[plate]``: header, start, one string per ``;LAYER:``, end.
+    settings : ProcessSettings, optional
+    regions : iterable of Region
+        Density regions (G-code coordinates).
+    progress : callable(float), optional
+        Called with the fraction done.
+    cancel : callable() -> bool, optional
+        Polled between layers; True raises ProcessCancelled.
+
+    Returns
+    -------
+    (list of str, ProcessReport)
+        The new list (same split as the input) and what was done.  An already
+        processed input comes back unchanged with ``report.already_processed``.
+
+    Raises
+    ------
+    GCodeError
+        Not complete Cura G-code.
+    """
+    t0 = time.perf_counter()
+    settings = settings or ProcessSettings()
+    settings.validate()
+    regions = _check_regions(regions)
+    layers = list(layers)
+    if not layers or not any(layers):
+        raise GCodeError("the input is empty")
+    survey = Survey()
+    chunks = list(iter_chunks(layers))
+    for i, chunk in enumerate(chunks):
+        survey.add(chunk, i)
+    info = check_cura_gcode(layers[0] + (layers[1] if len(layers) > 1 else ""), chunks[-1] if len(chunks) > 1 else "", survey.layer_chunks)
+    if info.processed:
+        return layers, ProcessReport(already_processed=True, seconds=time.perf_counter() - t0)
+    run = _Run(settings, regions, info, survey)
+    out = []
+    total = len(chunks)
+    for i, chunk in enumerate(chunks):
+        if cancel is not None and cancel():
+            raise ProcessCancelled("cancelled")
+        out.append(run.process_chunk(chunk))
+        if progress is not None and (i % 16 == 0 or i == total - 1):
+            progress((i + 1) / total)
+    out[0] = run.finish(out[0])
+    if len(out) != len(layers):
+        # The caller's list was not split at layers: hand back one string per chunk (still Cura's form).
+        pass
+    run.report.seconds = time.perf_counter() - t0
+    return out, run.report
+
+
+def process_file(
+    in_path,
+    out_path=None,
+    settings: ProcessSettings | None = None,
+    *,
+    regions: Iterable[Region] = (),
+    in_place: bool = False,
+    progress: Callable[[float], None] | None = None,
+    cancel: Callable[[], bool] | None = None,
+) -> ProcessReport:
+    """Process a G-code file, streaming layer by layer; write `out_path` atomically.
+
+    The body goes to a temporary file first; then header (with the new totals)
+    and body are written to a temporary file next to `out_path` and renamed over
+    it.  Nothing is written when the input is refused, already processed, or
+    processing raises.
+
+    Raises
+    ------
+    GCodeError
+        Not complete Cura G-code (nothing written).
+    FileNotFoundError, ValueError
+        Missing input, or neither `out_path` nor `in_place`.
+    """
+    t0 = time.perf_counter()
+    settings = settings or ProcessSettings()
+    settings.validate()
+    regions = _check_regions(regions)
+    in_path = os.fspath(in_path)
+    if out_path is None:
+        if not in_place:
+            raise ValueError("give an output path, or in_place=True to replace the input")
+        out_path = in_path
+    out_path = os.fspath(out_path)
+    if not os.path.isfile(in_path):
+        raise FileNotFoundError(f"no such file: {in_path}")
+    if os.path.abspath(out_path) == os.path.abspath(in_path) and not in_place:
+        raise ValueError("the output would overwrite the input; use in_place=True for that")
+    size = max(os.path.getsize(in_path), 1)
+
+    def chunks():
+        try:
+            with open(in_path, encoding="utf-8", newline="") as f:
+                yield from iter_file_chunks(f)
+        except UnicodeDecodeError as exc:
+            raise GCodeError(f"{in_path} is not a text G-code file ({exc.reason} at byte {exc.start})") from None
+
+    survey = Survey()
+    for i, chunk in enumerate(chunks()):
+        survey.add(chunk, i)
+    info = check_cura_gcode(survey.first_chunk, survey.last_chunk if survey.layer_chunks else "", survey.layer_chunks)
+    if info.processed:
+        return ProcessReport(already_processed=True, seconds=time.perf_counter() - t0)
+    run = _Run(settings, regions, info, survey)
+    out_dir = os.path.dirname(os.path.abspath(out_path))
+    body_fd, body_path = tempfile.mkstemp(prefix=".delaunay-body-", suffix=".gcode", dir=out_dir)
+    final_path = None
+    try:
+        header_out = None
+        done = 0
+        with os.fdopen(body_fd, "w", encoding="utf-8", newline="") as body:
+            for i, chunk in enumerate(chunks()):
+                if cancel is not None and cancel():
+                    raise ProcessCancelled("cancelled")
+                text = run.process_chunk(chunk)
+                done += len(chunk)
+                if i == 0:
+                    header_out = text
+                else:
+                    body.write(text)
+                if progress is not None and i % 32 == 0:
+                    progress(min(1.0, done / size))
+        header_out = run.finish(header_out or "")
+        final_fd, final_path = tempfile.mkstemp(prefix=".delaunay-out-", suffix=".gcode", dir=out_dir)
+        with os.fdopen(final_fd, "w", encoding="utf-8", newline="") as out, open(body_path, encoding="utf-8", newline="") as body:
+            out.write(header_out)
+            shutil.copyfileobj(body, out, 1 << 20)
+            out.flush()
+            os.fsync(out.fileno())
+        # mkstemp makes 0600 files: give the output the mode an ordinary new file gets (or the old file's)
+        if os.path.exists(out_path):
+            shutil.copymode(out_path, final_path)
+        else:
+            os.chmod(final_path, 0o666 & ~_umask())
+        os.replace(final_path, out_path)
+        final_path = None
+    finally:
+        if os.path.exists(body_path):
+            os.unlink(body_path)
+        if final_path is not None and os.path.exists(final_path):
+            os.unlink(final_path)
+    if progress is not None:
+        progress(1.0)
+    run.report.seconds = time.perf_counter() - t0
+    return run.report

@@ -1,0 +1,252 @@
+"""process_gcode on real CuraEngine 4.13 output (the bundled demo G-code).
+
+Every processed result is checked with DelaunayInfill.gcode.verify (non-FILL
+lines identical, machine state handed back after every FILL block, Cura's
+E/mm, infill inside the area, old infill places covered); the checker itself
+is shown to catch broken G-code in test_gcode_verify.py.
+"""
+
+from __future__ import annotations
+
+import gzip
+import os
+import re
+
+import numpy as np
+import pytest
+from shapely import affinity
+from shapely.geometry import Polygon
+
+from DelaunayInfill.gcode import GCodeError, MeshSettings, ProcessSettings, Region, process_gcode
+from DelaunayInfill.gcode.read import (
+    FILL,
+    MARKER,
+    MachineState,
+    RetractionModel,
+    as_cura_list,
+    iter_chunks,
+    parse_layer,
+)
+from DelaunayInfill.gcode.verify import verify
+
+DATA = os.path.join(os.path.dirname(__file__), "..", "DelaunayInfill", "data")
+
+
+def bundled(name: str) -> str:
+    with gzip.open(os.path.join(DATA, name), "rt", encoding="utf-8", newline="") as f:
+        return f.read()
+
+
+@pytest.fixture(scope="module")
+def star():
+    return as_cura_list(bundled("star.gcode.gz"))
+
+
+@pytest.fixture(scope="module")
+def bracket():
+    return as_cura_list(bundled("hbracket_modifier.gcode.gz"))
+
+
+@pytest.fixture(scope="module")
+def star_done(star):
+    before = list(star)
+    out, report = process_gcode(star, ProcessSettings(seed=3))
+    assert star == before, "process_gcode must not modify its input"
+    return out, report
+
+
+def fill_runs(layers, layer_number):
+    """New FILL extrusion polylines of one layer, each shape (m, 2)."""
+    from DelaunayInfill.gcode.area import runs_of
+
+    state, r = MachineState(), RetractionModel()
+    for chunk in iter_chunks(layers):
+        parse = parse_layer(chunk, state, r)
+        if parse.number == layer_number:
+            m = parse.moves
+            fill = (m["kind"] == FILL) & (m["de"] > 0) & ((m["x1"] != m["x0"]) | (m["y1"] != m["y0"]))
+            return runs_of(parse, fill)
+    raise AssertionError(f"no layer {layer_number}")
+
+
+def test_star_is_processed_and_passes_every_check(star, star_done):
+    out, report = star_done
+    assert report.layers_processed == 42 and not report.failed_layers
+    assert report.layers_processed + report.layers_kept == report.layers_total == 50
+    assert report.blocks_replaced == 42
+    check = verify(star, out, min_density=0.2)
+    assert check.ok, check.problems
+    assert check.blocks_rewritten == 42
+    assert check.max_e_per_mm_error < 0.005
+    assert check.new_infill_mm > 10000
+
+
+def test_output_keeps_cura_list_form_and_marks_the_header(star, star_done):
+    out, _ = star_done
+    assert len(out) == len(star)
+    assert out[1:] != star[1:]
+    for a, b in zip(star[2:-1], out[2:-1], strict=True):
+        assert b.startswith(a.split("\n", 1)[0])  # same ;LAYER: line first
+    assert MARKER in out[0] and MARKER not in "".join(out[1:])
+    assert out[-1] == star[-1]
+
+
+def test_density_is_cura_s_when_not_given_and_measured_within_two_points(star_done):
+    _, report = star_done
+    (base,) = report.regions
+    assert base.target == pytest.approx(0.20, abs=0.005)  # inferred from Cura's 20 % grid
+    assert abs(base.measured - base.target) <= 0.02
+
+
+@pytest.mark.parametrize("density", [0.10, 0.35])
+def test_given_density_is_met(star, density):
+    out, report = process_gcode(star, ProcessSettings(density=density, seed=1))
+    (base,) = report.regions
+    assert base.target == density
+    assert abs(base.measured - density) <= 0.02, report.format_table()
+    check = verify(star, out, min_density=density)
+    assert check.ok, check.problems
+
+
+def test_header_time_and_filament_follow_the_new_moves(star, star_done):
+    out, report = star_done
+    t_old = int(re.search(r"^;TIME:(\d+)", star[0], re.M).group(1))
+    t_new = int(re.search(r"^;TIME:(\d+)", out[0], re.M).group(1))
+    assert t_new - t_old == round(report.time_after_s - report.time_before_s)
+    elapsed_old = [float(v) for v in re.findall(r";TIME_ELAPSED:([\d.]+)", "".join(star))]
+    elapsed_new = [float(v) for v in re.findall(r";TIME_ELAPSED:([\d.]+)", "".join(out))]
+    assert len(elapsed_new) == len(elapsed_old)
+    assert np.all(np.diff(elapsed_new) > 0), "elapsed time must keep increasing"
+    assert elapsed_new[-1] == pytest.approx(report.time_after_s, abs=1e-3)
+    assert elapsed_old[-1] == pytest.approx(report.time_before_s, abs=1e-3)
+    # the E register at the end is unchanged (the new E is shifted back after each block)
+    assert report.filament_after_mm != report.filament_before_mm
+
+
+def test_processing_twice_is_a_no_op(star_done):
+    out, _ = star_done
+    again, report = process_gcode(out, ProcessSettings(seed=3))
+    assert report.already_processed
+    assert again == out
+
+
+def test_same_seed_same_gcode_other_seed_other_gcode(star, star_done):
+    out, _ = star_done
+    same, _ = process_gcode(star, ProcessSettings(seed=3))
+    other, _ = process_gcode(star, ProcessSettings(seed=4))
+    assert same == out
+    assert other != out
+
+
+def test_infill_mesh_modifier_becomes_a_region_in_one_seamless_pattern(bracket):
+    out, report = process_gcode(bracket, ProcessSettings(seed=2))
+    assert not report.failed_layers
+    names = [r.name for r in report.regions]
+    assert names == ["base", "mesh hbracket_box.stl"]
+    base, box = report.regions
+    assert base.target == pytest.approx(0.20, abs=0.01) and box.target == pytest.approx(0.60, abs=0.01)
+    for r in report.regions:
+        assert abs(r.measured - r.target) <= 0.02, report.format_table()
+    check = verify(bracket, out, min_density=0.2)
+    assert check.ok, check.problems
+    # seamless: some new infill polylines cross the modifier's border (x = 110 in G-code coordinates)
+    runs = fill_runs(out, 20)
+    crossing = [run for run in runs if run[:, 0].min() < 109.5 < 110.5 < run[:, 0].max()]
+    assert crossing, "paths are split at the modifier border"
+
+
+def test_mesh_density_option_overrides_the_modifier_density(bracket):
+    settings = ProcessSettings(seed=2, meshes={"hbracket_box.stl": MeshSettings(density=0.4)})
+    _, report = process_gcode(bracket, settings)
+    box = report.regions[1]
+    assert box.target == pytest.approx(0.4)
+    assert abs(box.measured - 0.4) <= 0.02
+
+
+def test_disabled_mesh_keeps_cura_s_infill_exactly(bracket):
+    settings = ProcessSettings(seed=2, meshes={"hbracket.stl": MeshSettings(enabled=False), "hbracket_box.stl": MeshSettings(enabled=False)})
+    out, report = process_gcode(bracket, settings)
+    assert report.layers_processed == 0
+    assert out[1:] == bracket[1:]
+
+
+def test_polygon_regions_in_gcode_coordinates(star):
+    # a 20 x 20 mm square around the star's centre at 50 %, the rest at 15 %
+    square = affinity.translate(Polygon([(-10, -10), (10, -10), (10, 10), (-10, 10)]), 110, 110)
+    out, report = process_gcode(star, ProcessSettings(density=0.15, seed=5), regions=[Region(0.5, polygon=square, name="square")])
+    got = {r.name: r for r in report.regions}
+    assert set(got) == {"base", "square"}
+    for r in got.values():
+        assert abs(r.measured - r.target) <= 0.02, report.format_table()
+    assert verify(star, out, min_density=0.15).ok
+
+
+def test_unsupported_fill_content_keeps_cura_s_block(star):
+    layers = list(star)
+    k = next(i for i, t in enumerate(layers) if t.startswith(";LAYER:20\n"))
+    lines = layers[k].split("\n")
+    j = next(i for i, line in enumerate(lines) if line.startswith("G1 ") and " E" in line and i > lines.index(";TYPE:FILL"))
+    lines.insert(j + 1, "G2 X110 Y110 I1 J1")  # an arc inside FILL: not Cura's, not rewritten
+    layers[k] = "\n".join(lines)
+    out, report = process_gcode(layers, ProcessSettings(seed=3))
+    assert out[k].split("\n;TIME_ELAPSED")[0] == layers[k].split("\n;TIME_ELAPSED")[0]
+    assert report.blocks_kept >= 1
+    assert report.layers_processed == 41
+
+
+def test_refuses_garbage_and_other_slicers():
+    with pytest.raises(GCodeError):
+        process_gcode([";generated by PrusaSlicer\nG28\nG1 X1 Y1\n"])
+    with pytest.raises(GCodeError):
+        process_gcode(["\x00\x01garbage"])
+    with pytest.raises(GCodeError):
+        process_gcode([])
+
+
+def test_bad_settings_are_refused_with_a_message(star):
+    with pytest.raises(ValueError, match="density"):
+        process_gcode(star, ProcessSettings(density=1.5))
+    with pytest.raises(ValueError, match="layout"):
+        process_gcode(star, ProcessSettings(layout="spiral"))
+    for bad in (-0.1, 1.5):  # 0 is allowed: "no infill there" (tests/test_gcode_fixes.py)
+        with pytest.raises(ValueError, match="density"):
+            Region(bad, polygon=Polygon([(0, 0), (1, 0), (1, 1)]))
+
+
+def test_tool_change_infill_keeps_its_extruder_and_e_register(star):
+    """Layer 20's infill printed by extruder 1 after a tool change (Cura writes T1 + G92 E0)."""
+    layers = list(star)
+    k = next(i for i, t in enumerate(layers) if t.startswith(";LAYER:20\n"))
+    lines = layers[k].split("\n")
+    start = lines.index(";TYPE:FILL")
+    stop = next(i for i in range(start + 1, len(lines)) if lines[i].startswith(";TYPE:"))
+    e_values = [float(v) for line in lines[:start] for v in re.findall(r" E(-?[\d.]+)", line)]
+    e_before = e_values[-1] if e_values else float(re.findall(r" E(-?[\d.]+)", layers[k - 1])[-1])
+    e_after = float(re.findall(r" E(-?[\d.]+)", "\n".join(lines[start:stop]))[-1])
+
+    def rebase(line):  # the T1 block counts E from 0
+        return re.sub(r" E(-?[\d.]+)", lambda m: f" E{float(m.group(1)) - e_before:.5f}", line)
+
+    block = [rebase(line) for line in lines[start + 1 : stop]]
+    lines[start:stop] = ["T1", "G92 E0", lines[start], *block, "T0", f"G92 E{e_after:.5f}"]
+    layers[k] = "\n".join(lines)
+    out, report = process_gcode(layers, ProcessSettings(seed=3))
+    assert not report.failed_layers
+    new_lines = out[k].split("\n")
+    t1, t0 = new_lines.index("T1"), new_lines.index("T0")
+    assert new_lines[t1 + 1] == "G92 E0"
+    new_block = "\n".join(new_lines[t1:t0])
+    assert new_block != "\n".join(lines[start : start + len(block) + 3])
+    assert not re.search(r"^T\d", "\n".join(new_lines[t1 + 1 : t0]), re.M), "no tool change inside the new infill"
+    check = verify(layers, out, min_density=0.2)
+    assert check.ok, check.problems
+
+
+def test_modifier_given_as_exact_mesh_is_listed_once(bracket):
+    """The plugin passes its modifier meshes as Regions too; the exact mesh replaces the reconstruction."""
+    box = Region.from_stl(os.path.join(DATA, "hbracket_box.stl"), 0.6, offset=(110, 110, 0), name="hbracket_box.stl")
+    out, report = process_gcode(bracket, ProcessSettings(seed=2), regions=[box])
+    names = [r.name for r in report.regions]
+    assert names == ["base", "hbracket_box.stl"]
+    assert abs(report.regions[1].measured - 0.6) <= 0.02, report.format_table()
+    assert verify(bracket, out, min_density=0.2).ok

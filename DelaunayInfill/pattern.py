@@ -217,7 +217,9 @@ class InfillPattern:
         settled = np.array([z.area > 0 for z in zones])
         # Zones under about 4 x 4 of their own radii cannot be calibrated by the
         # radius alone; they are balanced by thinning or refinement at the end.
+        # (A single zone is fine-tuned by scaling instead.)
         small = settled & np.array([z.area < 16.0 * radius_of(t) ** 2 for z, t in zip(zones, targets)])
+        small &= np.count_nonzero(settled) > 1
         factors = np.ones(len(targets))
         best = None
         for iteration in range(1, _MAX_ITERATIONS + 1):

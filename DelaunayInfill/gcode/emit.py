@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry import contains_xy
-from .area import sample_segments
+from ..routing import clip_segments
 from .read import MachineState, RetractionModel
 
 __all__ = ["EmitParams", "EmitResult", "emit_block", "fmt"]
@@ -70,25 +70,26 @@ class EmitResult:
 
 
 def _travels_inside(starts: np.ndarray, ends: np.ndarray, part, step: float) -> np.ndarray:
-    """Whether each straight travel stays inside `part` (sampled every `step` mm)."""
+    """Whether each straight travel stays inside `part` (exactly: clipped length equals length).
+
+    `step` is kept for the callers' signature; the test no longer samples.
+    """
     k = len(starts)
     if k == 0:
         return np.zeros(0, dtype=bool)
     known = np.isfinite(starts).all(axis=1) & np.isfinite(ends).all(axis=1)
-    if part is None or part.is_empty or not known.all():
-        if part is None or part.is_empty or not known.any():
-            return np.zeros(k, dtype=bool)
-        result = np.zeros(k, dtype=bool)
-        result[known] = _travels_inside(starts[known], ends[known], part, step)
+    result = np.zeros(k, dtype=bool)
+    if part is None or part.is_empty or not known.any():
         return result
-    segs = np.stack([starts, ends], axis=1)
-    d = segs[:, 1] - segs[:, 0]
-    n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / step).astype(np.int64)) + 1
-    pts = sample_segments(segs, step)
-    inside = contains_xy(part, pts[:, 0], pts[:, 1])
-    owner = np.repeat(np.arange(k), n)
-    bad = np.bincount(owner, weights=~inside, minlength=k)
-    return bad == 0
+    segs = np.stack([starts[known], ends[known]], axis=1)
+    length = np.hypot(*(segs[:, 1] - segs[:, 0]).T)
+    pieces, source = clip_segments(segs, part, return_index=True)
+    inside = np.bincount(source, np.hypot(*(pieces[:, 1] - pieces[:, 0]).T), minlength=len(segs))
+    # zero-length travels: inside when their point is
+    point = length <= 1e-9
+    inside_point = contains_xy(part, segs[:, 0, 0], segs[:, 0, 1])
+    result[known] = np.where(point, inside_point, inside >= length - 1e-6)
+    return result
 
 
 def _xy_words(paths: list[np.ndarray], cache: dict | None) -> list[str]:

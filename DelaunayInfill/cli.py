@@ -215,7 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a density region from an STL (G-code coordinates, see --modifier-offset); repeatable")
     p.add_argument("--modifier-offset", type=_offset, metavar="X,Y[,Z]",
                    help="shift modifier STLs into G-code coordinates (e.g. 110,110 for a model that CuraEngine "
-                   "centred on a 220 mm bed)")
+                   "centred on a 220 mm bed; Z: a raft's lift, raft thickness + air gap - layer 0 Z overlap)")
     p.add_argument("--mesh", action="append", default=[], type=_named_percent, metavar="NAME:PCT",
                    help="density of a ;MESH: in the G-code (a Cura infill_mesh modifier, or a model); repeatable")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")

@@ -87,3 +87,21 @@ def test_estimates_are_corrected_by_the_report():
     assert amounts[0] == pytest.approx(5000.0 - 100.0 * math.pi * 0.875**2)
     assert failed_layers(report) == [7, 9]
     assert adjusted_estimates({}, [], object(), _snapshot([_model("star.stl")])) is None
+
+
+def test_regions_are_lifted_by_the_raft():
+    """A raft lifts the model (layers >= 1) by raft thickness + air gap - layer 0 overlap; regions follow."""
+    raft = {"raft_base_thickness": 0.3, "raft_interface_thickness": 0.2, "raft_surface_layers": 2,
+            "raft_surface_thickness": 0.1, "raft_airgap": 0.3, "layer_0_z_overlap": 0.15}
+    triangles = np.zeros((12, 3, 3))
+    region = MeshSnapshot(name="DelaunayRegion_1", values={"infill_sparse_density": 60, "infill_mesh": True},
+                          enabled=True, is_region=True, triangles=triangles)
+    snapshot = _snapshot([_model("star.stl"), region], adhesion_type="raft", adhesion_extruder_nr=1)
+    snapshot.extruder_values[1].update(raft)
+    _, regions = build_settings(snapshot)
+    assert regions[0].triangles[..., 2] == pytest.approx(0.3 + 0.2 + 0.2 + 0.3 - 0.15)
+    assert triangles[..., 2].max() == 0.0  # the scene's own array is untouched
+    snapshot.extruder_values[1]["raft_interface_layers"] = 3  # Cura 5: several interface layers
+    assert build_settings(snapshot)[1][0].triangles[..., 2] == pytest.approx(0.3 + 0.6 + 0.2 + 0.3 - 0.15)
+    snapshot.global_values["adhesion_type"] = "brim"
+    assert build_settings(snapshot)[1][0].triangles[..., 2] == pytest.approx(0.0)

@@ -27,6 +27,36 @@ def _fraction(percent, default=None):
     return default if number is None else number / 100.0
 
 
+def raft_z_offset(snapshot) -> float:
+    """How far CuraEngine lifts the model above the plate for a raft, mm (0 without raft).
+
+    The G-code's model layers 1, 2, ... print at scene height + raft thickness
+    + air gap - ``layer_0_z_overlap`` (layer 0 sits the overlap higher); the
+    regions' triangles are in scene heights, so they are lifted by this much
+    to slice at the G-code's layer heights.  Checked against CuraEngine 4.13.
+    """
+    glob = snapshot.global_values
+    if str(glob.get("adhesion_type") or "") != "raft":
+        return 0.0
+    position = int(_number(glob.get("adhesion_extruder_nr"), 0.0))
+    values = snapshot.extruder_values.get(position) or next(iter(snapshot.extruder_values.values()), {})
+    thickness = (
+        _number(values.get("raft_base_thickness"), 0.0)
+        + _number(values.get("raft_interface_layers"), 1.0) * _number(values.get("raft_interface_thickness"), 0.0)
+        + _number(values.get("raft_surface_layers"), 0.0) * _number(values.get("raft_surface_thickness"), 0.0)
+    )
+    return thickness + _number(values.get("raft_airgap"), 0.0) - _number(values.get("layer_0_z_overlap"), 0.0)
+
+
+def _lifted(triangles, dz: float):
+    """Triangles (t, 3, 3) mm moved up by `dz` mm (a copy)."""
+    import numpy as np
+
+    out = np.array(triangles, dtype=float)
+    out[..., 2] += dz
+    return out
+
+
 def _primary_model(snapshot):
     """The enabled model whose seed, layout and extruder drive the pass."""
     models = sorted((m for m in snapshot.meshes if m.enabled and not m.is_region), key=lambda m: m.name)
@@ -50,6 +80,7 @@ def build_settings(snapshot):
 
     meshes = {}
     regions = []
+    lift = raft_z_offset(snapshot)
     for mesh in snapshot.meshes:
         values = mesh.values
         density = _fraction(values.get("infill_sparse_density"))
@@ -63,12 +94,12 @@ def build_settings(snapshot):
         if mesh.is_region:
             settings.region_density = density
             if snapshot.scene_regions is None and mesh.enabled and mesh.triangles is not None and density is not None:
-                regions.append(Region(density, triangles=mesh.triangles, name=mesh.name))
+                regions.append(Region(density, triangles=_lifted(mesh.triangles, lift), name=mesh.name))
         meshes[mesh.name] = settings
     if snapshot.scene_regions is not None:
         enabled_names = {m.name for m in snapshot.meshes if m.enabled}
         regions = [
-            Region(float(r.density), triangles=r.triangles, name=r.name)
+            Region(float(r.density), triangles=_lifted(r.triangles, lift), name=r.name)
             for r in snapshot.scene_regions
             if r.name in enabled_names
         ]

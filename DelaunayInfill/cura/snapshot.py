@@ -53,6 +53,14 @@ EXTRUDER_KEYS = (
     "acceleration_travel",
     "travel_avoid_distance",
     "retraction_combing_max_distance",
+    # raft: how far CuraEngine lifts the model (read from the adhesion extruder)
+    "raft_base_thickness",
+    "raft_interface_thickness",
+    "raft_interface_layers",  # Cura 5.x; Cura 4.13 prints one interface layer
+    "raft_surface_layers",
+    "raft_surface_thickness",
+    "raft_airgap",
+    "layer_0_z_overlap",
 )
 
 #: Read from the global stack.
@@ -70,6 +78,8 @@ GLOBAL_KEYS = (
     "print_sequence",
     "machine_extruder_count",
     "machine_acceleration",
+    "adhesion_type",
+    "adhesion_extruder_nr",
 )
 
 

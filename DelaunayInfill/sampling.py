@@ -9,10 +9,15 @@ Two samplers:
     slightly different radius, changes it only locally.  The accepted set is
     the greedy maximal independent set of the candidates' conflict graph in
     priority order, computed in parallel rounds (a candidate wins when it has
-    the lowest priority among its remaining conflicts).  Then every Delaunay
-    triangle whose empty circumcircle is wider than the radius gets its
-    circumcentre inserted, until none is left: the set is maximal (see
-    `uncovered_fraction`) and interior triangle angles are at least 30 deg.
+    the lowest priority among its remaining conflicts; with a constant radius
+    the first round runs on the grid arrays themselves).  Then the gaps left
+    between the disks are filled until none is left, so the set is maximal
+    (see `uncovered_fraction`) and interior triangle angles are at least
+    30 deg.  With a constant radius a gap is found exactly, without a
+    triangulation, at a crossing of two circles that no third disk covers,
+    and filled at the Delaunay circumcentre reached from there; with a
+    variable radius the circumcentres of a Delaunay triangulation whose
+    circles are wider than the radius there are inserted.
 
 ``bridson``
     The paper's algorithm (Bridson 2007 as described by Qiao et al. 2022):
@@ -190,24 +195,36 @@ def greedy_independent_set(n: int, a: np.ndarray, b: np.ndarray, priority: np.nd
     a, b : ndarray of int, shape (e,)
         Undirected edges (each once, either direction).
     priority : ndarray, shape (n,)
-        Distinct priorities; lower wins.
+        Priorities; lower wins (ties go to the lower node index).
 
     Returns
     -------
     ndarray of bool, shape (n,)
     """
-    active = np.ones(n, dtype=bool)
-    chosen = np.zeros(n, dtype=bool)
+    a = np.asarray(a, dtype=np.intp)
+    b = np.asarray(b, dtype=np.intp)
+    pa, pb = priority[a], priority[b]
+    a_first = (pa < pb) | ((pa == pb) & (a < b))
+    first, second = np.where(a_first, a, b), np.where(a_first, b, a)
+    return _oriented_independent_set(np.ones(n, dtype=bool), np.zeros(n, dtype=bool), first, second)
+
+
+def _oriented_independent_set(active, chosen, first, second) -> np.ndarray:
+    """Finish the greedy rounds on edges oriented `first` -> `second`.
+
+    `active` (nodes still undecided) and `chosen` (bool, shape (n,)) are
+    updated in place; the orientation (priority order) is acyclic, so every
+    round keeps at least the earliest active node.
+    """
     while active.any():
-        live = active[a] & active[b]
-        a, b = a[live], b[live]
-        beaten = np.zeros(n, dtype=bool)
-        beaten[np.where(priority[a] < priority[b], b, a)] = True
+        live = active[first] & active[second]
+        first, second = first[live], second[live]
+        beaten = np.zeros(len(active), dtype=bool)
+        beaten[second] = True
         win = active & ~beaten
         chosen |= win
         active &= ~win
-        active[b[win[a]]] = False
-        active[a[win[b]]] = False
+        active[second[win[first]]] = False
     return chosen
 
 
@@ -220,44 +237,132 @@ def _jitter(ii: np.ndarray, jj: np.ndarray, spacing: float, salt: int, seed: int
     ]
 
 
-def _grid_candidates(area, spacing: float, salt: int, seed: int):
-    """Jittered-grid candidates inside `area`; returns points and their cell ids."""
+def _grid_cells(area, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cell indices (i, j), each shape (nx, ny), of the grid anchored at the origin over `area`."""
     x0, y0, x1, y1 = area.bounds
     i = np.arange(math.floor(x0 / spacing), math.floor(x1 / spacing) + 1)
     j = np.arange(math.floor(y0 / spacing), math.floor(y1 / spacing) + 1)
-    ii, jj = np.meshgrid(i, j, indexing="ij")
-    ii, jj = ii.ravel(), jj.ravel()
+    return np.meshgrid(i, j, indexing="ij")
+
+
+def _grid_candidates(area, spacing: float, salt: int, seed: int):
+    """Jittered-grid candidates inside `area`; returns points and their cell ids."""
+    ii, jj = (a.ravel() for a in _grid_cells(area, spacing))
     pts = _jitter(ii, jj, spacing, salt, seed)
     inside = contains_xy(area, pts[:, 0], pts[:, 1])
     return pts[inside], ii[inside], jj[inside]
 
 
-def _conflicts_with(samples, samples_r, pts, r, uniform: bool) -> np.ndarray:
-    """Bool mask (len(pts),): candidate conflicts with an existing sample."""
-    if len(samples) == 0 or len(pts) == 0:
-        return np.zeros(len(pts), dtype=bool)
-    if uniform:
-        d, _ = cKDTree(samples).query(pts, k=1, distance_upper_bound=r[0])
-        return d < r[0]
-    ci, _ = close_pairs(pts, r, samples, samples_r)
-    mask = np.zeros(len(pts), dtype=bool)
-    mask[ci] = True
-    return mask
+def _grid_offsets(shape: tuple[int, int], reach: int):
+    """Half of the (2 reach + 1)^2 cell window, as pairs of array slices.
+
+    Yields ``(sa, sb, step)``: ``x[sa]`` and ``x[sb]`` pair every cell with
+    its neighbour at one offset, ``step`` is that offset in flat (row-major)
+    indices; each unordered pair of cells comes once.
+    """
+    nx, ny = shape
+    for di in range(reach + 1):
+        for dj in range(-reach, reach + 1):
+            if (di == 0 and dj <= 0) or di >= nx or abs(dj) >= ny:
+                continue
+            sa = (slice(0, nx - di), slice(max(0, -dj), ny - max(0, dj)))
+            sb = (slice(di, nx), slice(max(0, dj), ny - max(0, -dj)))
+            yield sa, sb, di * ny + dj
 
 
-def _independent_candidates(pts, r, priority, uniform: bool) -> np.ndarray:
-    """Greedy maximal independent subset of candidates (bool mask)."""
-    if uniform:
-        pairs = cKDTree(pts).query_pairs(r[0], output_type="ndarray")
-        pi, pj = pairs[:, 0], pairs[:, 1]
+def _grid_independent_set(x, y, inside, priority, radius: float, reach: int) -> np.ndarray:
+    """Greedy independent set of a jittered grid, one candidate per cell.
+
+    The first round, which decides most cells, works on the cell arrays
+    directly (the grid is the spatial index: no tree, no edge list); only the
+    conflicts between cells it leaves open become an edge list.
+
+    Parameters
+    ----------
+    x, y : ndarray, shape (nx, ny)
+        Candidate coordinates per cell, mm.
+    inside : ndarray of bool, shape (nx, ny)
+        Cells whose candidate takes part.
+    priority : ndarray, shape (nx, ny)
+        Lower wins; ties go to the lower flat index.
+    radius : float
+        Candidates closer than this conflict, mm.
+    reach : int
+        Largest cell offset at which two candidates can conflict.
+
+    Returns
+    -------
+    ndarray of bool, shape (nx, ny)
+        Equal to `greedy_independent_set` on the candidates' conflict graph.
+    """
+    r2 = radius * radius
+    x = np.where(inside, x, np.nan)  # NaN distances: cells outside conflict with none
+    beaten = np.zeros(x.shape, dtype=bool)
+    conflicts = []
+    for sa, sb, step in _grid_offsets(x.shape, reach):
+        dx = x[sa] - x[sb]
+        dx *= dx
+        dy = y[sa] - y[sb]
+        dy *= dy
+        dx += dy
+        hit = dx < r2
+        a_first = priority[sa] <= priority[sb]
+        a_beats = hit & a_first
+        b_beats = hit > a_first
+        beaten[sb] |= a_beats
+        beaten[sa] |= b_beats
+        conflicts.append((sa, sb, step, a_beats, b_beats))
+    win = inside & ~beaten
+    decided = win | ~inside
+    for sa, sb, _, a_beats, b_beats in conflicts:
+        decided[sb] |= a_beats & win[sa]
+        decided[sa] |= b_beats & win[sb]
+    open_ = ~decided
+    flat = np.arange(x.size).reshape(x.shape)
+    first, second = [], []
+    for sa, sb, step, a_beats, b_beats in conflicts:
+        both = open_[sa] & open_[sb]
+        for beats, forward in ((a_beats, True), (b_beats, False)):
+            left = flat[sa][beats & both]
+            if left.size:
+                first.append(left if forward else left + step)
+                second.append(left + step if forward else left)
+    chosen = win.ravel()
+    if first:
+        _oriented_independent_set(open_.ravel(), chosen, np.concatenate(first), np.concatenate(second))
     else:
-        pi, pj = close_pairs(pts, r)
-    return greedy_independent_set(len(pts), pi, pj, priority)
+        chosen |= open_.ravel()
+    return chosen.reshape(x.shape)
+
+
+def _uniform_level(area, spacing: float, radius: float, seed: int) -> np.ndarray:
+    """Greedy independent set of one hashed candidate per grid cell (constant radius); (n, 2)."""
+    ii, jj = _grid_cells(area, spacing)
+    x = (ii + hash_uniform(ii, jj, 0, seed)) * spacing
+    y = (jj + hash_uniform(ii, jj, 1, seed)) * spacing
+    inside = contains_xy(area, x.ravel(), y.ravel()).reshape(x.shape)
+    reach = max(1, math.ceil(radius / spacing - 1e-9))
+    chosen = _grid_independent_set(x, y, inside, hash_uniform(ii, jj, 3, seed), radius, reach)
+    return np.stack((x[chosen], y[chosen]), axis=1)
+
+
+def _variable_level(area, spacing: float, r_lo: float, radius_fn, seed: int):
+    """Greedy independent set of hashed grid candidates, thinned where the radius is larger.
+
+    Thinning by (r_min / r)^2 keeps the number of candidates per disk
+    constant.  Returns the samples (n, 2) and their radii (n,).
+    """
+    pts, ii, jj = _grid_candidates(area, spacing, 0, seed)
+    r = radius_fn(pts)
+    keep = hash_uniform(ii, jj, 2, seed) < (r_lo / r) ** 2
+    pts, ii, jj, r = pts[keep], ii[keep], jj[keep], r[keep]
+    pi, pj = close_pairs(pts, r)
+    chosen = greedy_independent_set(len(pts), pi, pj, hash_uniform(ii, jj, 3, seed))
+    return pts[chosen], r[chosen]
 
 
 def _sample_fast(area, radius_fn, seed: int) -> np.ndarray:
     r_lo, r_hi = _radius_range(area, radius_fn)
-    uniform = r_hi <= r_lo * (1 + 1e-12)
     spacing = _CANDIDATE_SPACING * r_lo
     expected = area.area / (spacing * spacing)
     if expected > 2e7:
@@ -265,25 +370,252 @@ def _sample_fast(area, radius_fn, seed: int) -> np.ndarray:
             f"radius {r_lo:.4g} mm is too small for a region of {area.area:.4g} mm^2 "
             f"(about {expected:.3g} candidates)"
         )
-    # Level 0: one candidate per cell of a grid of spacing r/2 everywhere.
-    pts, ii, jj = _grid_candidates(area, spacing, 0, seed)
-    r = radius_fn(pts)
-    if not uniform:
-        # Thin where the radius is larger, so candidates per disk stay constant.
-        keep = hash_uniform(ii, jj, 2, seed) < (r_lo / r) ** 2
-        pts, ii, jj, r = pts[keep], ii[keep], jj[keep], r[keep]
-    chosen = _independent_candidates(pts, r, hash_uniform(ii, jj, 3, seed), uniform)
-    samples, samples_r = pts[chosen], r[chosen]
-    return _fill_gaps(area, samples, samples_r, radius_fn, uniform)
+    if r_hi <= r_lo * (1 + 1e-12):
+        return _fill_gaps_constant(area, _uniform_level(area, spacing, r_lo, seed), r_lo)
+    samples, samples_r = _variable_level(area, spacing, r_lo, radius_fn, seed)
+    return _fill_gaps_variable(area, samples, samples_r, radius_fn)
 
 
-def _fill_gaps(area, samples, samples_r, radius_fn, uniform: bool, passes: int = 6):
-    """Insert circumcentres of empty circles wider than the radius.
+# --------------------------------------------------------------------------- gap filling
+_SHRINK = 1e-9  # a crossing lies on two circles: a third covers it when its power is below -_SHRINK r^2
+_NUDGE = 1e-6  # fallback insertion: this far (in radii) into the gap from its open crossing
+_WALK_NEIGHBOURS = 6  # second try for a gap centre: the third sample among the nearest to the crossing
+
+
+def _neighbour_table(rows: np.ndarray, cols: np.ndarray, n_rows: int, pad: int) -> np.ndarray:
+    """Padded neighbour lists, shape (n_rows, most neighbours): ``cols`` grouped by ``rows``, then `pad`."""
+    order = np.argsort(rows, kind="stable")
+    rows, cols = rows[order], cols[order]
+    count = np.bincount(rows, minlength=n_rows)
+    table = np.full((n_rows, max(1, int(count.max(initial=0)))), pad, dtype=np.intp)
+    table[rows, np.arange(len(rows)) - (np.cumsum(count) - count)[rows]] = cols
+    return table
+
+
+def _padded_coordinates(samples: np.ndarray):
+    """x and y of the samples, shape (n + 1,): NaN at n, the padding of neighbour tables (compares false)."""
+    xs = np.empty(len(samples) + 1)
+    ys = np.empty(len(samples) + 1)
+    xs[:-1], ys[:-1] = samples[:, 0], samples[:, 1]
+    xs[-1] = ys[-1] = np.nan
+    return xs, ys
+
+
+def _open_crossings(samples: np.ndarray, radius: float, a, b, near):
+    """Crossings of the circles around samples a and b that no third disk covers.
+
+    Both crossings of each pair are tested against the samples closer than
+    2 r to `a`, the only ones that can cover them.
+
+    Parameters
+    ----------
+    samples : ndarray, shape (n, 2)
+        mm.
+    radius : float
+        mm.
+    a, b : ndarray of int, shape (m,)
+        Sample pairs closer than 2 r, each once.
+    near : ndarray of int, shape (m, k)
+        Every sample closer than 2 r to each `a`, padded with n.
+
+    Returns
+    -------
+    crossing, inward : ndarray, shape (q, 2)
+        Open crossings (mm) and unit vectors from them into the gap (along
+        the bisector of the pair, away from both).
+    which : ndarray of int, shape (q,)
+        Index of each one's pair in `a`, `b`.
+    """
+    xs, ys = _padded_coordinates(samples)
+    r2 = radius * radius
+    ax, ay = xs[a], ys[a]
+    ex, ey = xs[b] - ax, ys[b] - ay
+    length = np.sqrt(ex * ex + ey * ey)
+    ux, uy = -ey / length, ex / length  # unit normal, left of a -> b
+    half_chord = np.sqrt(np.maximum(r2 - 0.25 * length * length, 0.0))
+    mx, my = ax + 0.5 * ex, ay + 0.5 * ey
+    sides = [
+        (mx + half_chord * ux, my + half_chord * uy, ux, uy),
+        (mx - half_chord * ux, my - half_chord * uy, -ux, -uy),
+    ]
+    # Nearest distance^2 per crossing, a column of `near` at a time: short
+    # 1-D temporaries instead of (m, k) ones.
+    nearest = [np.full(len(a), np.inf) for _ in sides]
+    for column in near.T:
+        kx, ky = xs[column], ys[column]
+        for (px, py, _, _), best in zip(sides, nearest):
+            dx = px - kx
+            dx *= dx
+            dy = py - ky
+            dy *= dy
+            dx += dy
+            np.fmin(best, dx, out=best)
+    found = []
+    for (px, py, wx, wy), best in zip(sides, nearest):
+        gap = np.flatnonzero(best >= (1.0 - _SHRINK) * r2)
+        found.append((np.stack((px[gap], py[gap]), axis=1), np.stack((wx[gap], wy[gap]), axis=1), gap))
+    return tuple(np.concatenate(parts) for parts in zip(*found))
+
+
+def _gap_centres(samples: np.ndarray, radius: float, crossing, inward, pair, near) -> np.ndarray:
+    """Centre of the gap beyond each open crossing.
+
+    Walking from crossing p of circles a and b along the bisector, into the
+    gap, a and b stay the nearest samples until a third one is as near:
+    there the walk ends, at the circumcentre of a Delaunay triangle whose
+    circumradius exceeds r.  The third sample is sought in `near`.
+
+    Parameters
+    ----------
+    crossing, inward : ndarray, shape (q, 2)
+    pair : ndarray of int, shape (q, 2)
+    near : ndarray of int, shape (q, k)
+        Candidate third samples (n: padding).
+
+    Returns
+    -------
+    ndarray, shape (q, 2)
+        NaN where no sample in `near` closes the walk.
+    """
+    xs, ys = _padded_coordinates(samples)
+    r2 = radius * radius
+    px, py = crossing[:, 0], crossing[:, 1]
+    wx, wy = inward[:, 0], inward[:, 1]
+    gx, gy = xs[pair[:, 0]], ys[pair[:, 0]]
+    # Power of x = p + t w against s: |p - s|^2 - r^2 + 2 t (p - s).w + t^2,
+    # the same t^2 for every s: the walk meets s at t = power / (2 (s - a).w).
+    # a and b have power 0 at p: only samples of positive power close it.
+    half_t = np.full(len(px), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for column in near.T:
+            kx, ky = xs[column], ys[column]
+            dx = px - kx
+            dy = py - ky
+            power = dx * dx + dy * dy - r2
+            rate = (kx - gx) * wx + (ky - gy) * wy
+            step = power / rate
+            step[~((rate > 1e-12 * radius) & (power > _SHRINK * r2))] = np.inf
+            np.fmin(half_t, step, out=half_t)
+    half_t[np.isinf(half_t)] = np.nan
+    return crossing + (0.5 * half_t)[:, None] * inward
+
+
+def _tree(points: np.ndarray) -> cKDTree:
+    """A k-d tree built for a few queries: midpoint splits build faster than median ones."""
+    return cKDTree(points, balanced_tree=False, compact_nodes=False)
+
+
+def _first_of_each(pts: np.ndarray, tolerance: float):
+    """Groups of points (m, 2) equal after rounding to `tolerance`.
+
+    Returns the index of one point of each group, and each point's group.
+    """
+    cell = np.round(pts / tolerance)
+    _, first, group = np.unique(cell[:, 0] + 1j * cell[:, 1], return_index=True, return_inverse=True)
+    return first, group.ravel()
+
+
+def _free_inside(area, tree: cKDTree, pts: np.ndarray, radius: float) -> np.ndarray:
+    """Bool mask (m,): finite point inside `area` with no sample closer than `radius`."""
+    ok = np.isfinite(pts).all(axis=1)
+    ok[ok] = contains_xy(area, pts[ok, 0], pts[ok, 1])
+    if ok.any():
+        d, _ = tree.query(pts[ok], k=1, distance_upper_bound=radius)
+        ok[ok] = np.isinf(d)
+    return ok
+
+
+def _fill_gaps_constant(area, samples: np.ndarray, radius: float) -> np.ndarray:
+    """Insert samples into the gaps between the disks until none is left (constant r).
+
+    A gap (part of the area farther than r from every sample) is bounded by
+    circle arcs and the area's border; where two arcs meet, at a crossing of
+    two circles, no third disk covers it.  The first pass tests both
+    crossings of every pair of samples closer than 2 r.  Each pass inserts,
+    where it conflicts with no sample, each open crossing's gap centre (or,
+    when that is unusable, a point just inside the gap at the crossing), an
+    independent subset, deepest gap first.  A gap left after a pass touches a
+    disk added in it, so later passes test only the crossings of added
+    circles; they go on until nothing is added (a few passes after the first
+    grid).  The result is maximal (see `uncovered_fraction`), so interior
+    Delaunay angles are at least 30 deg, without triangulating.
+
+    Parameters
+    ----------
+    area : shapely (Multi)Polygon
+    samples : ndarray, shape (n, 2)
+        Samples at least `radius` apart, mm.
+    radius : float
+        mm.
+
+    Returns
+    -------
+    ndarray, shape (n + k, 2)
+        `samples` followed by the inserted ones.
+    """
+    if len(samples) < 2:
+        return samples
+    tree = _tree(samples)
+    pairs = tree.query_pairs(2.0 * radius, output_type="ndarray")
+    a, b = pairs[:, 0], pairs[:, 1]
+    table = _neighbour_table(np.concatenate((a, b)), np.concatenate((b, a)), len(samples), len(samples))
+    row, every_row = a, True  # table: rows of all samples at first, of the added ones later
+    while True:  # each pass adds a sample at least, and r-separated samples in the area are finitely many
+        p, u, which = _open_crossings(samples, radius, a, b, table[row])
+        if len(p) == 0:
+            break
+        pair = np.stack((a[which], b[which]), axis=1)
+        # The gap's third sample: near a (or b, when the table has its row).
+        near = np.concatenate((table[pair[:, 0]], table[pair[:, 1]]), axis=1) if every_row else table[row[which]]
+        cand = _gap_centres(samples, radius, p, u, pair, near)
+        # The crossings around a gap reach the same centre: test each centre
+        # once, keep one crossing per usable centre and every other crossing.
+        found = np.flatnonzero(np.isfinite(cand[:, 0]))
+        first, same = _first_of_each(cand[found], 1e-6 * radius)
+        ok = np.zeros(len(cand), dtype=bool)
+        ok[found] = _free_inside(area, tree, cand[found[first]], radius)[same]
+        keep = np.sort(np.concatenate((np.flatnonzero(~ok), found[first][ok[found[first]]])))
+        p, u, pair, cand, ok = p[keep], u[keep], pair[keep], cand[keep], ok[keep]
+        # Farther from both: among the nearest to the crossing.
+        rest = np.flatnonzero(~ok)
+        if rest.size:
+            nearest = tree.query(p[rest], k=min(_WALK_NEIGHBOURS, len(samples)))[1].reshape(rest.size, -1)
+            cand[rest] = _gap_centres(samples, radius, p[rest], u[rest], pair[rest], nearest)
+            ok[rest] = _free_inside(area, tree, cand[rest], radius)
+        # Still nothing (centre outside the area): the open crossing itself,
+        # nudged into the gap.
+        rest = np.flatnonzero(~ok)
+        cand[rest] = p[rest] + (_NUDGE * radius) * u[rest]
+        ok[rest] = _free_inside(area, tree, cand[rest], radius)
+        base = samples[pair[:, 0]]
+        depth = np.einsum("ij,ij->i", cand - base, cand - base)
+        cand, depth = cand[ok], depth[ok]
+        if len(cand) == 0:
+            break
+        pairs = _tree(cand).query_pairs(radius, output_type="ndarray")
+        won = greedy_independent_set(len(cand), pairs[:, 0], pairs[:, 1], -depth)
+        fresh = np.arange(len(samples), len(samples) + np.count_nonzero(won))
+        samples = np.concatenate((samples, cand[won]))
+        tree = _tree(samples)
+        # Every sample within 2 r of each added one: at most 18 (20 disks of
+        # radius r / 2 do not fit in one of radius 2.5 r), after itself.
+        table = tree.query(samples[fresh], k=min(19, len(samples)), distance_upper_bound=2.0 * radius)[1]
+        table, every_row = table.reshape(len(fresh), -1)[:, 1:], False
+        row, column = np.nonzero(table < len(samples))
+        a, b = fresh[row], table[row, column]
+        once = (b < fresh[0]) | (a < b)  # a pair of two added samples once
+        row, a, b = row[once], a[once], b[once]
+    return samples
+
+
+def _fill_gaps_variable(area, samples, samples_r, radius_fn, passes: int = 6):
+    """Insert circumcentres of empty circles wider than the radius (variable r).
 
     A Delaunay triangle whose circumradius exceeds the radius at its
     circumcentre leaves that centre uncovered; inserting such centres (an
-    independent subset per pass) makes the set maximal, which also bounds
-    every interior triangle angle below by 30 degrees.
+    independent subset per pass) makes the set maximal.  (With a variable
+    radius a sample may not go wherever no disk reaches: it must also keep its
+    own radius free, so the gaps are sought among the circumcentres.)
     """
     from scipy.spatial import Delaunay, QhullError
 
@@ -315,11 +647,14 @@ def _fill_gaps(area, samples, samples_r, radius_fn, uniform: bool, passes: int =
         rc = radius_fn(center)
         gap = radius > rc * (1 + 1e-9)
         center, rc = center[gap], rc[gap]
-        free = ~_conflicts_with(samples, samples_r, center, rc, uniform)
+        ci, _ = close_pairs(center, rc, samples, samples_r)
+        free = np.ones(len(center), dtype=bool)
+        free[ci] = False
         center, rc = center[free], rc[free]
         if len(center) == 0:
             break
-        won = _independent_candidates(center, rc, np.arange(len(center), dtype=float), uniform)
+        pi, pj = close_pairs(center, rc)
+        won = greedy_independent_set(len(center), pi, pj, np.arange(len(center), dtype=float))
         samples = np.r_[samples, center[won]]
         samples_r = np.r_[samples_r, rc[won]]
         triangulation.add_points(center[won])

@@ -4,13 +4,22 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.spatial import cKDTree
+from scipy.spatial import Delaunay, cKDTree
 from shapely.geometry import Point, Polygon, box
 from shapes import annulus, star
 
 from DelaunayInfill import sample_poisson_disk
 from DelaunayInfill.geometry import contains_xy
-from DelaunayInfill.sampling import close_pairs, greedy_independent_set, uncovered_fraction
+from DelaunayInfill.sampling import (
+    _fill_gaps_constant,
+    _grid_cells,
+    _grid_independent_set,
+    _uniform_level,
+    close_pairs,
+    greedy_independent_set,
+    hash_uniform,
+    uncovered_fraction,
+)
 
 METHODS = ["fast", "bridson"]
 
@@ -18,6 +27,39 @@ METHODS = ["fast", "bridson"]
 def min_pair_distance(points):
     d, _ = cKDTree(points).query(points, k=2)
     return d[:, 1].min()
+
+
+def wide_interior_circles(region, points, r):
+    """Delaunay circumcircles wider than r centred inside `region` farther than r from its border.
+
+    Each one's centre is an uncovered point: a maximal sampling has none.
+    """
+    tri = Delaunay(points).simplices
+    a, b, c = (points[tri[:, k]] for k in range(3))
+    d = 2.0 * (a[:, 0] * (b[:, 1] - c[:, 1]) + b[:, 0] * (c[:, 1] - a[:, 1]) + c[:, 0] * (a[:, 1] - b[:, 1]))
+    sa, sb, sc = ((p * p).sum(axis=1) for p in (a, b, c))
+    centre = np.c_[
+        (sa * (b[:, 1] - c[:, 1]) + sb * (c[:, 1] - a[:, 1]) + sc * (a[:, 1] - b[:, 1])) / d,
+        (sa * (c[:, 0] - b[:, 0]) + sb * (a[:, 0] - c[:, 0]) + sc * (b[:, 0] - a[:, 0])) / d,
+    ]
+    wide = np.hypot(*(centre - a).T) > r * (1 + 1e-9)
+    deep = contains_xy(region.buffer(-r), centre[:, 0], centre[:, 1])
+    return np.count_nonzero(wide & deep)
+
+
+def random_region(seed):
+    """A star-shaped polygon, sometimes with a hole and a thin appendix."""
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(3, 12))
+    angle = np.sort(rng.uniform(0, 2 * np.pi, k))
+    radius = rng.uniform(10, 40, k)
+    region = Polygon(np.c_[radius * np.cos(angle), radius * np.sin(angle)]).buffer(0)
+    if rng.random() < 0.5:
+        region = region.difference(Point(region.centroid).buffer(rng.uniform(1, 6)))
+    if rng.random() < 0.3:
+        x1 = region.bounds[2]
+        region = region.union(box(x1 - 2, 0, x1 + 15, rng.uniform(1, 5)))
+    return region
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -136,3 +178,65 @@ def test_greedy_independent_set_is_independent_and_maximal(n, seed):
         if not seq[nbrs].any():
             seq[v] = True
     np.testing.assert_array_equal(chosen, seq)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.floats(0.4, 3.0))
+def test_fast_sampler_leaves_no_gap_inside(seed, r):
+    """Exact maximality away from the border, also in pockets open to it (min angle >= 30 deg there)."""
+    region = random_region(seed)
+    pts = sample_poisson_disk(region, r, seed=seed)
+    assert min_pair_distance(pts) >= r * (1 - 1e-9)
+    assert contains_xy(region, pts[:, 0], pts[:, 1]).all()
+    assert wide_interior_circles(region, pts, r) == 0
+
+
+@pytest.mark.parametrize("drop", [0.2, 0.6, 0.95])
+def test_gap_filling_closes_big_holes_in_several_passes(drop):
+    """Start from a maximal set with most samples removed: the filler alone must make it maximal again."""
+    region = box(0, 0, 50, 40).difference(Point(20, 20).buffer(6))
+    r = 1.5
+    full = _uniform_level(region, 0.5 * r, r, seed=5)
+    keep = np.random.default_rng(1).random(len(full)) >= drop
+    sparse = full[keep]
+    filled = _fill_gaps_constant(region, sparse, r)
+    np.testing.assert_array_equal(filled[: len(sparse)], sparse)  # existing samples stay, new ones follow
+    assert min_pair_distance(filled) >= r * (1 - 1e-9)
+    assert wide_interior_circles(region, filled, r) == 0
+    assert uncovered_fraction(region, filled, r) < 0.002
+
+
+def test_single_sample_grows_into_a_maximal_set():
+    region = Point(0, 0).buffer(8)
+    filled = _fill_gaps_constant(region, np.array([[0.0, 0.0], [1.2, 0.5]]), 1.0)
+    assert len(filled) > 40
+    assert min_pair_distance(filled) >= 1.0 - 1e-9
+    assert wide_interior_circles(region, filled, 1.0) == 0
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.floats(0.3, 0.9))
+def test_grid_independent_set_equals_the_greedy_one(seed, spacing):
+    """The array-shift first round + edge-list rounds give the sequential greedy set."""
+    region = Point(0, 0).buffer(12).difference(box(-2, -20, 2, 3))
+    r = 1.0
+    ii, jj = _grid_cells(region, spacing)
+    x = (ii + hash_uniform(ii, jj, 0, seed)) * spacing
+    y = (jj + hash_uniform(ii, jj, 1, seed)) * spacing
+    inside = contains_xy(region, x.ravel(), y.ravel()).reshape(x.shape)
+    priority = hash_uniform(ii, jj, 3, seed)
+    reach = int(np.ceil(r / spacing - 1e-9))
+    chosen = _grid_independent_set(x, y, inside, priority, r, reach)
+    pts = np.c_[x[inside], y[inside]]
+    pairs = cKDTree(pts).query_pairs(r, output_type="ndarray")
+    close = np.hypot(*(pts[pairs[:, 0]] - pts[pairs[:, 1]]).T) < r
+    expected = greedy_independent_set(len(pts), pairs[close, 0], pairs[close, 1], priority[inside])
+    np.testing.assert_array_equal(chosen[inside], expected)
+    assert not chosen[~inside].any()
+
+
+def test_greedy_independent_set_with_equal_priorities_ends_and_prefers_lower_index():
+    a = np.array([0, 1, 2, 3])
+    b = np.array([1, 2, 0, 4])  # a triangle 0-1-2 and an edge 3-4
+    chosen = greedy_independent_set(5, a, b, np.zeros(5))
+    np.testing.assert_array_equal(chosen, [True, False, False, True, False])

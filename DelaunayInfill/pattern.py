@@ -22,10 +22,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .decomposition import decompose_convex
 from .density import KAPPA, DensityMap, check_line_width, paper_radius
-from .geometry import as_area, contains_xy, polygons_of, to_multipolygon
+from .geometry import as_area, boundary_segments, contains_xy, polygons_of, to_multipolygon, unary_union
 from .routing import chain_segments, clip_segments, odd_vertex_count, order_paths
 from .sampling import sample_poisson_disk
 from .triangulation import (
@@ -57,6 +58,114 @@ def measured_density(segments: np.ndarray, zone, line_width: float) -> float:
     if zone.is_empty or zone.area <= 0:
         return float("nan")
     return segment_length(clip_segments(segments, zone)) * line_width / zone.area
+
+
+class _ZoneMeter:
+    """Length of segments inside fixed zones, fast enough to call in calibration loops.
+
+    A segment whose midpoint lies farther from a zone's boundary than half
+    its length is wholly inside or outside that zone (a point-in-area test
+    on the midpoint says which); only the others are cut where they cross
+    the boundary (as `clip_segments` does, against boundary edges prepared
+    once per zone).  Boundary distances come from the edges' midpoints, the
+    edges being at most `piece` mm long (an error of at most piece / 2,
+    allowed for).
+    """
+
+    def __init__(self, zones: list, piece: float = 0.5):
+        self.zones = zones
+        self.piece = piece
+        self.edges = []
+        self.trees = []
+        for zone in zones:
+            edges = boundary_segments(zone) if zone.area > 0 else np.zeros((0, 2, 2))
+            if len(edges) == 0:
+                self.edges.append(edges)
+                self.trees.append(None)
+                continue
+            d = edges[:, 1] - edges[:, 0]
+            n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / piece).astype(np.int64))
+            seg = np.repeat(np.arange(len(edges)), n)
+            k = np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n)
+            t0, t1 = (k / n[seg])[:, None], ((k + 1) / n[seg])[:, None]
+            edges = np.stack([edges[seg, 0] + d[seg] * t0, edges[seg, 0] + d[seg] * t1], axis=1)
+            self.edges.append(edges)
+            self.trees.append(cKDTree(edges.mean(axis=1)))
+
+    def inside(self, segments: np.ndarray, k: int) -> np.ndarray:
+        """Length (mm) of each segment (m, 2, 2) inside zone k, shape (m,)."""
+        out = np.zeros(len(segments))
+        tree = self.trees[k]
+        if tree is None or len(segments) == 0:
+            return out
+        zone = self.zones[k]
+        length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
+        mid = 0.5 * (segments[:, 0] + segments[:, 1])
+        dist = tree.query(mid)[0]
+        sure = dist - 0.5 * self.piece > 0.5 * length + 1e-9
+        sure_idx = np.flatnonzero(sure)
+        hit = contains_xy(zone, mid[sure_idx, 0], mid[sure_idx, 1])
+        out[sure_idx[hit]] = length[sure_idx[hit]]
+        unsure = np.flatnonzero(~sure)
+        if unsure.size:
+            # Long segments near the boundary: split into short pieces first, most of which
+            # are then sure; the few left are cut against nearby boundary edges only.
+            pieces, source = _split_segments(segments[unsure], 2.0 * self.piece)
+            plen = np.hypot(*(pieces[:, 1] - pieces[:, 0]).T)
+            pmid = 0.5 * (pieces[:, 0] + pieces[:, 1])
+            near = tree.query(pmid)[0] - 0.5 * self.piece <= 0.5 * plen + 1e-9
+            got = np.zeros(len(pieces))
+            far = np.flatnonzero(~near)
+            got[far] = np.where(contains_xy(zone, pmid[far, 0], pmid[far, 1]), plen[far], 0.0)
+            close = np.flatnonzero(near)
+            if close.size:
+                got[close] = self._cut(pieces[close], plen[close], k)
+            out[unsure] = np.bincount(source, got, unsure.size)
+        return out
+
+    def _cut(self, segments: np.ndarray, length: np.ndarray, k: int) -> np.ndarray:
+        """Inside length of segments near zone k's boundary: cut at every crossing, midpoints tested."""
+        edges = self.edges[k]
+        reach = 0.5 * (float(length.max()) + self.piece) + 1e-6
+        sdm = cKDTree(segments.mean(axis=1)).sparse_distance_matrix(self.trees[k], reach, output_type="ndarray")
+        ia, ib = sdm["i"].astype(np.intp), sdm["j"].astype(np.intp)
+        p, r = segments[ia, 0], segments[ia, 1] - segments[ia, 0]
+        q, e = edges[ib, 0], edges[ib, 1] - edges[ib, 0]
+        denom = r[:, 0] * e[:, 1] - r[:, 1] * e[:, 0]
+        ok = np.abs(denom) > 1e-15
+        safe = np.where(ok, denom, 1.0)
+        qp = q - p
+        t = (qp[:, 0] * e[:, 1] - qp[:, 1] * e[:, 0]) / safe
+        u = (qp[:, 0] * r[:, 1] - qp[:, 1] * r[:, 0]) / safe
+        cross = ok & (t > 1e-9) & (t < 1 - 1e-9) & (u >= -1e-9) & (u <= 1 + 1e-9)
+        m = len(segments)
+        seg_id = np.r_[np.arange(m), np.arange(m), ia[cross]]
+        param = np.r_[np.zeros(m), np.ones(m), t[cross]]
+        order = np.lexsort((param, seg_id))
+        seg_id, param = seg_id[order], param[order]
+        same = seg_id[1:] == seg_id[:-1]
+        sid, t0, t1 = seg_id[:-1][same], param[:-1][same], param[1:][same]
+        a, b = segments[sid, 0], segments[sid, 1]
+        mid = a + (b - a) * (0.5 * (t0 + t1))[:, None]
+        inside = contains_xy(self.zones[k], mid[:, 0], mid[:, 1])
+        return np.bincount(sid[inside], (t1 - t0)[inside] * length[sid[inside]], m)
+
+    def densities(self, segments: np.ndarray, width: float) -> np.ndarray:
+        """Measured density per zone (NaN where a zone has no area)."""
+        return np.array([
+            self.inside(segments, k).sum() * width / z.area if z.area > 0 else np.nan
+            for k, z in enumerate(self.zones)
+        ])
+
+
+def _split_segments(segments: np.ndarray, longest: float) -> tuple[np.ndarray, np.ndarray]:
+    """Segments (m, 2, 2) cut into equal pieces at most `longest` mm; returns (pieces, source index)."""
+    d = segments[:, 1] - segments[:, 0]
+    n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / longest).astype(np.int64))
+    seg = np.repeat(np.arange(len(segments)), n)
+    k = np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n)
+    t0, t1 = (k / n[seg])[:, None], ((k + 1) / n[seg])[:, None]
+    return np.stack([segments[seg, 0] + d[seg] * t0, segments[seg, 0] + d[seg] * t1], axis=1), seg
 
 
 @dataclass
@@ -129,7 +238,8 @@ class InfillPattern:
     line_width : float
     layout, calibration : str
     calibrated_densities : list of float
-        Measured density per zone of the footprint after calibration.
+        Measured density per zone of the footprint after calibration (away
+        from borders between zones: `_zone_interiors`).
     """
 
     segments: np.ndarray
@@ -174,8 +284,10 @@ class InfillPattern:
         seed : int
         layout : {"seamless", "paper"}
         calibration : {"measured", "paper"}
-            ``measured``: iterate until the printed density of every zone is
-            within 0.15 points of its target; ``paper``: Formula (6).
+            ``measured``: iterate until the printed density of every zone
+            (away from its borders with other zones) is within 0.15 points
+            of its target, then balance the zones still off by single edges;
+            ``paper``: Formula (6).
         relax : int
             Lloyd relaxation steps (more regular triangles).
         feather : float
@@ -209,6 +321,7 @@ class InfillPattern:
         if dmap.feather > 0:  # calibrate the zone cores, not the blend bands between them
             cores = [to_multipolygon(z.buffer(-0.5 * dmap.feather)) for z in zones]
             zones = [core if core.area > 0 else z for core, z in zip(cores, zones)]
+        zones = _zone_interiors(zones, width, None if dmap.feather > 0 else area)
         targets = np.array(dmap.densities)
         lowest = float(min(targets))
         reach = 1.3 * (paper_radius(lowest, width) if calibration == "paper" else KAPPA * width / lowest)
@@ -221,6 +334,7 @@ class InfillPattern:
         small = settled & np.array([z.area < 16.0 * radius_of(t) ** 2 for z, t in zip(zones, targets)])
         small &= np.count_nonzero(settled) > 1
         factors = np.ones(len(targets))
+        meter = _ZoneMeter(zones)
         best = None
         for iteration in range(1, _MAX_ITERATIONS + 1):
             scaled = dmap.with_densities(targets * factors)
@@ -233,7 +347,7 @@ class InfillPattern:
                 points = relax_points(points, sampling_area, radius_fn, relax, seed=seed)
             triangles = _drop_slivers(points, delaunay_triangles(points), radius_fn)
             segments = points[unique_edges(triangles)]
-            measured = np.array([measured_density(segments, z, width) for z in zones])
+            measured = meter.densities(segments, width)
             error = np.abs(measured - targets)
             # Small zones above target can be thinned afterwards; shortfalls cannot.
             error = np.where(small & (measured > targets), 0.25 * error, error)
@@ -253,8 +367,11 @@ class InfillPattern:
         worst, points, triangles, segments, measured, iteration = best
         if calibration == "measured" and worst > _TOLERANCE and np.count_nonzero(settled) == 1:
             points, segments, measured = _fine_tune_scale(points, triangles, zones, targets, width, reach, area)
-        elif calibration == "measured" and worst > _TOLERANCE and small.any():
-            points, triangles, segments, measured = _balance_zones(points, triangles, zones, targets, width, small)
+        elif calibration == "measured" and worst > _TOLERANCE and np.count_nonzero(settled) > 1:
+            # Zones still off target after calibration (small ones, or dense ones next to a
+            # sparse neighbour that keeps their samples apart) are balanced edge by edge.
+            off = small | (settled & np.isfinite(measured) & (np.abs(measured - targets) > _TOLERANCE))
+            points, triangles, segments, measured = _balance_zones(points, triangles, meter, targets, width, off)
         return cls(segments, points, triangles, area, dmap, width, "seamless", calibration, list(measured), iteration)
 
     @classmethod
@@ -342,6 +459,29 @@ class InfillPattern:
         }
 
 
+def _zone_interiors(zones: list, width: float, tiled=None) -> list:
+    """Zones without a band of one line width along their borders with other zones.
+
+    Across a border between two densities the pattern changes over a few
+    samples; the band where it does belongs to neither zone, so each zone is
+    calibrated on the rest (as a region's density is measured: away from its
+    border, where lines on the border do not count twice).  Borders with the
+    footprint's outline are kept; a zone that the band would (nearly) swallow
+    is kept whole.  `tiled`: the area the zones tile, when they do (the
+    others are then its difference with a zone).
+    """
+    present = [k for k, z in enumerate(zones) if z.area > 0]
+    if len(present) < 2:
+        return zones
+    out = list(zones)
+    for k in present:
+        others = tiled.difference(zones[k]) if tiled is not None else unary_union([zones[j] for j in present if j != k])
+        inner = to_multipolygon(zones[k].difference(others.buffer(width, 4)))
+        if inner.area >= 0.3 * zones[k].area:
+            out[k] = inner
+    return out
+
+
 def _fine_tune_scale(points, triangles, zones, targets, width, reach, area):
     """Scale a coarse single-zone pattern about the footprint centre to hit its target.
 
@@ -377,7 +517,7 @@ def _fine_tune_scale(points, triangles, zones, targets, width, reach, area):
     return scaled, segments, [measured_density(segments, z, width) for z in zones]
 
 
-def _balance_zones(points, triangles, zones, targets, width, small, rounds: int = 12):
+def _balance_zones(points, triangles, meter, targets, width, small, rounds: int = 12):
     """Bring zones that calibration cannot reach to their targets.
 
     A zone smaller than about two of its own radii cannot reach its target in
@@ -388,14 +528,15 @@ def _balance_zones(points, triangles, zones, targets, width, small, rounds: int 
     triangles in zones that print too sparse (Delaunay refinement: edges go
     where the zone is emptiest and the triangulation stays Delaunay).
 
-    Only the zones flagged in `small` are balanced.
+    Only the zones flagged in `small` are balanced; `meter` (`_ZoneMeter`)
+    holds the zones and measures them.
 
     Returns
     -------
     (points, triangles, segments, measured)
     """
     for _ in range(rounds):
-        segments, measured = _thin_dense_zones(points, triangles, zones, targets, width, small)
+        segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small)
         short = [k for k in np.flatnonzero(small) if measured[k] < targets[k] - _TOLERANCE]
         if not short:
             break
@@ -411,12 +552,12 @@ def _balance_zones(points, triangles, zones, targets, width, small, rounds: int 
         radius = np.where(ok, np.hypot(*(center - a).T), 0.0)
         added = []
         for k in short:
-            inside = np.flatnonzero(contains_xy(zones[k], center[:, 0], center[:, 1]))
+            inside = np.flatnonzero(contains_xy(meter.zones[k], center[:, 0], center[:, 1]))
             if inside.size == 0:
                 continue
             # About 3 circumradii of line per insertion; at most a third of
             # the zone's triangles per round.
-            missing = (targets[k] - measured[k]) * zones[k].area / width
+            missing = (targets[k] - measured[k]) * meter.zones[k].area / width
             widest = inside[np.argsort(-radius[inside])]
             count = int(np.clip(missing / max(3.0 * radius[widest[0]], 1e-9), 1, max(1, inside.size // 3)))
             added.append(center[widest[:count]])
@@ -425,11 +566,11 @@ def _balance_zones(points, triangles, zones, targets, width, small, rounds: int 
         points = np.r_[points, np.concatenate(added)]
         triangles = delaunay_triangles(points)
     else:
-        segments, measured = _thin_dense_zones(points, triangles, zones, targets, width, small)
+        segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small)
     return points, triangles, segments, measured
 
 
-def _thin_dense_zones(points, triangles, zones, targets, width, small):
+def _thin_dense_zones(points, triangles, meter, targets, width, small):
     """Leave out edges in zones that print denser than their target.
 
     A zone smaller than about two of its own radii cannot reach a low target
@@ -460,11 +601,13 @@ def _thin_dense_zones(points, triangles, zones, targets, width, small):
     owners[flat_edge[order][~first], 1] = flat_tri[order][~first]
     opened = np.zeros(len(triangles) + 1, dtype=bool)  # last slot stands for "no triangle"
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
-    for zone, target, thin in zip(zones, targets, small):
+    # Length of every edge inside every zone: leaving edges out does not change it.
+    inside_of = [meter.inside(segments, k) if meter.zones[k].area > 0 else np.zeros(len(edges))
+                 for k in range(len(meter.zones))]
+    for k, (zone, target, thin) in enumerate(zip(meter.zones, targets, small)):
         if not thin or zone.is_empty or zone.area <= 0:
             continue
-        pieces, source = clip_segments(segments[keep], zone, return_index=True)
-        inside = np.bincount(np.flatnonzero(keep)[source], np.hypot(*(pieces[:, 1] - pieces[:, 0]).T), len(edges))
+        inside = np.where(keep, inside_of[k], 0.0)
         excess = (inside.sum() * width / zone.area - target) * zone.area / width  # mm of line too many
         if excess <= 0:
             continue
@@ -483,8 +626,9 @@ def _thin_dense_zones(points, triangles, zones, targets, width, small):
                 opened[owners[e]] = True
                 opened[-1] = False
                 excess -= inside[e]
-    segments = segments[keep]
-    return segments, [measured_density(segments, z, width) for z in zones]
+    measured = [float(inside_of[k][keep].sum()) * width / z.area if z.area > 0 else float("nan")
+                for k, z in enumerate(meter.zones)]
+    return segments[keep], measured
 
 
 def _drop_slivers(points: np.ndarray, triangles: np.ndarray, radius_fn) -> np.ndarray:

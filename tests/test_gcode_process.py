@@ -9,6 +9,7 @@ is shown to catch broken G-code in test_gcode_verify.py.
 from __future__ import annotations
 
 import gzip
+import math
 import os
 import re
 
@@ -250,3 +251,68 @@ def test_modifier_given_as_exact_mesh_is_listed_once(bracket):
     assert names == ["base", "hbracket_box.stl"]
     assert abs(report.regions[1].measured - 0.6) <= 0.02, report.format_table()
     assert verify(bracket, out, min_density=0.2).ok
+
+
+# ----------------------------------------------------------------------------- modifier regions from line ends
+def _grid_lines(region, spacing: float, angles=(45.0, 135.0), phase: float = 0.3) -> np.ndarray:
+    """Cura-like grid infill: parallel lines `spacing` apart per angle, clipped to `region`; (k, 2, 2)."""
+    from shapely.geometry import LineString
+
+    minx, miny, maxx, maxy = region.bounds
+    centre = np.array([(minx + maxx) / 2, (miny + maxy) / 2])
+    reach = np.hypot(maxx - minx, maxy - miny)
+    out = []
+    for angle in angles:
+        u = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
+        n = np.array([-u[1], u[0]])
+        for off in np.arange(-reach, reach, spacing) + phase:
+            a, b = centre + off * n - reach * u, centre + off * n + reach * u
+            piece = LineString([a, b]).intersection(region)
+            for line in getattr(piece, "geoms", [piece]):
+                if not line.is_empty and line.length > 1e-6:
+                    coords = np.asarray(line.coords)
+                    out.extend(np.stack([coords[:-1], coords[1:]], axis=1))
+    return np.array(out).reshape(-1, 2, 2)
+
+
+@pytest.mark.parametrize("modifier_density", [0.1, 0.5])
+def test_modifier_shape_from_where_cura_s_lines_end(modifier_density):
+    """An infill_mesh modifier's area is rebuilt from where its and its host's lines end: within
+    2 % of its area (the nearest-line split is off by a band of up to half a spacing)."""
+    from DelaunayInfill.gcode.area import split_by_line_ends, split_by_lines
+
+    lw, overlap = 0.4, 0.04
+    inset = lw / 2 - overlap
+    area = Polygon([(0, 0), (60, 0), (60, 40), (30, 55), (0, 40)])
+    true = Polygon([(12, 8), (40, 8), (40, 30), (12, 30)])
+    host_fill = _grid_lines(area.buffer(-inset).difference(true.buffer(-overlap)), 2 * lw / 0.2)
+    mod_fill = _grid_lines(true.buffer(-inset, join_style=2), 2 * lw / modifier_density, phase=1.1)
+    spacings = [lw / 0.2, lw / modifier_density]
+    _, got = split_by_line_ends(area, [host_fill, mod_fill], spacings, inset, step=0.4)
+    _, nearest = split_by_lines(area, [host_fill, mod_fill], spacings, step=0.4)
+    error = got.symmetric_difference(true).area
+    assert error <= 0.02 * true.area, (error, true.area)
+    assert error < nearest.symmetric_difference(true).area
+
+
+def test_route_cuts_are_the_cheapest_split_of_the_route():
+    """The dynamic programme that shares a route among Cura's blocks finds the least travel (brute force)."""
+    import itertools
+
+    from DelaunayInfill.gcode.process import _route_cuts, _run_travel
+
+    rng = np.random.default_rng(3)
+    cost = lambda a, b: np.hypot(*(np.asarray(b, float) - np.asarray(a, float)).reshape(-1, 2).T)  # noqa: E731
+    for _ in range(20):
+        n, nb = int(rng.integers(1, 7)), int(rng.integers(1, 4))
+        paths = [rng.uniform(0, 50, (2, 2)) for _ in range(n)]
+        ends = rng.uniform(0, 50, (nb, 4))
+        cuts = _route_cuts(paths, ends, cost)
+        assert cuts[0] == 0 and cuts[-1] == n and np.all(np.diff(cuts) >= 0)
+        got = sum(_run_travel(paths[cuts[i]:cuts[i + 1]], ends[i], cost) for i in range(nb))
+        best = min(
+            sum(_run_travel(paths[c[i]:c[i + 1]], ends[i], cost) for i in range(nb))
+            for inner in itertools.combinations_with_replacement(range(n + 1), nb - 1)
+            for c in [(0, *inner, n)]
+        )
+        assert got == pytest.approx(best)

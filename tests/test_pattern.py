@@ -10,7 +10,8 @@ from shapes import SHAPES, star, star_regions
 
 from DelaunayInfill import InfillPattern, generate_infill
 from DelaunayInfill.decomposition import cross_turn, decompose_convex, is_convex, reflex_vertices
-from DelaunayInfill.geometry import contains_xy
+from DelaunayInfill.geometry import contains_xy, unary_union
+from DelaunayInfill.pattern import measured_density
 
 
 def length_in(segments, area):
@@ -235,3 +236,31 @@ def test_self_intersecting_region_is_repaired():
     bowtie = Polygon([(0, 0), (30, 30), (30, 0), (0, 30)])
     result = generate_infill(bowtie, 0.3, 0.4)
     assert abs(result.density - 0.3) <= 0.015
+
+
+def test_figure_10_region_interiors_within_two_points():
+    """Each region is calibrated away from its borders with other regions (where the pattern
+    changes density): measured there, the paper's Figure 10 regions are within the issue's 2 points."""
+    pattern = InfillPattern.build(star(), 0.3, 0.4, regions=star_regions(), seed=0)
+    zones = pattern.density_map.zones(pattern.footprint)[1:]
+    for zone, (_, want) in zip(zones, star_regions()):
+        others = [z for z in zones if z is not zone]
+        interior = zone.difference(unary_union(others).buffer(0.4))
+        got = measured_density(pattern.segments, interior, 0.4)
+        assert abs(got - want) <= 0.02, (got, want)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_zone_meter_measures_like_clipping(seed):
+    """The calibration's fast zone measurement equals exact clipping, crossings included."""
+    from DelaunayInfill.pattern import _ZoneMeter
+
+    rng = np.random.default_rng(seed)
+    zones = [star(), *[p for p, _ in star_regions()], box(-5, -5, 5, 5).difference(Point(0, 0).buffer(2))]
+    starts = rng.uniform(-35, 35, (400, 2))
+    ends = starts + rng.normal(0, 4, (400, 2)) * rng.choice([0.2, 1.0, 5.0], (400, 1))
+    segments = np.stack([starts, ends], axis=1)
+    meter = _ZoneMeter(zones)
+    for k, zone in enumerate(zones):
+        exact = measured_density(segments, zone, 0.4)
+        assert meter.densities(segments, 0.4)[k] == pytest.approx(exact, rel=1e-9, abs=1e-12)

@@ -17,10 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
-from shapely.geometry import LineString, MultiLineString, Polygon
+from shapely.geometry import LineString, MultiLineString, MultiPoint, Polygon
 from shapely.validation import make_valid
 
-from ..geometry import contains_xy, empty_area, polygons_of, to_multipolygon, unary_union
+from ..geometry import boundary_segments, contains_xy, empty_area, polygons_of, to_multipolygon, unary_union
 from .read import FILL, SKIN, WALL_INNER, WALL_OUTER, LayerParse
 
 __all__ = [
@@ -32,6 +32,9 @@ __all__ = [
     "sample_segments",
     "segments_of",
     "split_by_lines",
+    "split_by_line_ends",
+    "line_families",
+    "between_lines",
 ]
 
 _EPS = 0.02  # mm: closes numerical slivers between adjacent buffered lines
@@ -172,6 +175,70 @@ def fill_hull(runs: list[np.ndarray], line_width: float, reach: float, convex_fi
     return to_multipolygon(unary_union(pieces))
 
 
+@dataclass
+class _OwnerGrid:
+    """Which mesh's lines are nearest (in units of its spacing) at the centres of a grid's cells.
+
+    ``owner`` (rows, cols): mesh index, -1 outside the area; cell (i, j) spans
+    x from ``x0 + j * step``, y from ``y0 + i * step``.
+    """
+
+    x0: float
+    y0: float
+    step: float
+    owner: np.ndarray
+
+    def at(self, pts: np.ndarray) -> np.ndarray:
+        """Owner at points (p, 2); -1 outside the grid or the area."""
+        j = np.floor((pts[:, 0] - self.x0) / self.step).astype(np.int64)
+        i = np.floor((pts[:, 1] - self.y0) / self.step).astype(np.int64)
+        rows, cols = self.owner.shape
+        ok = (i >= 0) & (i < rows) & (j >= 0) & (j < cols)
+        out = np.full(len(pts), -1, dtype=np.int64)
+        out[ok] = self.owner[i[ok], j[ok]]
+        return out
+
+    def centres(self) -> np.ndarray:
+        """Cell centres, shape (rows, cols, 2)."""
+        rows, cols = self.owner.shape
+        gx, gy = np.meshgrid(self.x0 + (np.arange(cols) + 0.5) * self.step, self.y0 + (np.arange(rows) + 0.5) * self.step)
+        return np.stack([gx, gy], axis=-1)
+
+    def polygon(self, mask: np.ndarray):
+        """The cells where `mask` (rows, cols) holds, as one area: a rectangle per run of cells along a row."""
+        runs = np.diff(np.pad(mask, ((0, 0), (1, 1))).astype(np.int8), axis=1)
+        rows, first = np.nonzero(runs == 1)
+        _, stop = np.nonzero(runs == -1)  # row-major order: the i-th stop ends the i-th run
+        if len(rows) == 0:
+            return empty_area()
+        x0, x1 = self.x0 + first * self.step, self.x0 + stop * self.step
+        y0, y1 = self.y0 + rows * self.step, self.y0 + (rows + 1) * self.step
+        return to_multipolygon(unary_union([
+            Polygon([(a, c), (b, c), (b, d), (a, d)])
+            for a, b, c, d in zip(x0.tolist(), x1.tolist(), y0.tolist(), y1.tolist(), strict=True)
+        ]))
+
+
+def _owner_grid(area, fills: list[np.ndarray], spacings: list[float], step: float) -> _OwnerGrid | None:
+    """The nearest-line owner grid of `split_by_lines` (None: no area or no lines)."""
+    if area.is_empty or not any(len(f) for f in fills):
+        return None
+    minx, miny, maxx, maxy = area.bounds
+    step = max(step, np.sqrt((maxx - minx) * (maxy - miny) / 60000.0))
+    gx, gy = np.meshgrid(np.arange(minx + step / 2, maxx, step), np.arange(miny + step / 2, maxy, step))
+    pts = np.column_stack([gx.ravel(), gy.ravel()])
+    inside = contains_xy(area, pts[:, 0], pts[:, 1])
+    grid = np.full(gx.shape, -1, dtype=np.int64)
+    pts = pts[inside]
+    if len(pts):
+        dist = np.full((len(fills), len(pts)), np.inf)
+        for k, (fill, spacing) in enumerate(zip(fills, spacings, strict=True)):
+            if len(fill):
+                dist[k] = cKDTree(sample_segments(fill, step / 2)).query(pts)[0] / spacing
+        grid.ravel()[inside] = np.argmin(dist, axis=0)
+    return _OwnerGrid(minx, miny, step, grid)
+
+
 def split_by_lines(area, fills: list[np.ndarray], spacings: list[float], step: float = 0.5) -> list:
     """Split `area` among meshes by whose FILL lines are nearest, in units of each one's line spacing.
 
@@ -194,38 +261,285 @@ def split_by_lines(area, fills: list[np.ndarray], spacings: list[float], step: f
     list of MultiPolygon
         One per mesh, in the order given.
     """
-    out = [empty_area() for _ in fills]
-    if area.is_empty or not any(len(f) for f in fills):
-        return out
-    minx, miny, maxx, maxy = area.bounds
-    step = max(step, np.sqrt((maxx - minx) * (maxy - miny) / 60000.0))
-    gx, gy = np.meshgrid(np.arange(minx + step / 2, maxx, step), np.arange(miny + step / 2, maxy, step))
-    pts = np.column_stack([gx.ravel(), gy.ravel()])
-    inside = contains_xy(area, pts[:, 0], pts[:, 1])
-    pts = pts[inside]
-    if len(pts) == 0:
-        return out
-    dist = np.full((len(fills), len(pts)), np.inf)
-    for k, (fill, spacing) in enumerate(zip(fills, spacings, strict=True)):
-        if len(fill):
-            dist[k] = cKDTree(sample_segments(fill, step / 2)).query(pts)[0] / spacing
-    owner = np.argmin(dist, axis=0)
-    # Each mesh's grid cells as rectangles, one per run of cells along a grid row: far fewer
-    # shapes to merge than one square per cell.
-    grid = np.full(gx.shape, -1, dtype=np.int64)
-    grid.ravel()[inside] = owner
-    for k in range(len(fills)):
-        runs = np.diff(np.pad(grid == k, ((0, 0), (1, 1))).astype(np.int8), axis=1)
-        rows, first = np.nonzero(runs == 1)
-        _, stop = np.nonzero(runs == -1)  # row-major order: the i-th stop ends the i-th run
-        if len(rows) == 0:
+    grid = _owner_grid(area, fills, spacings, step)
+    if grid is None:
+        return [empty_area() for _ in fills]
+    return [to_multipolygon(grid.polygon(grid.owner == k).intersection(area)) if (grid.owner == k).any()
+            else empty_area() for k in range(len(fills))]
+
+
+def line_families(fill: np.ndarray, min_share: float = 0.12, max_families: int = 4) -> list[tuple[float, np.ndarray]]:
+    """Families of parallel lines among FILL segments (lines, grid, triangles patterns).
+
+    Parameters
+    ----------
+    fill : ndarray, shape (k, 2, 2)
+        Segments, mm.
+    min_share : float
+        A family holds at least this share of the total length.
+
+    Returns
+    -------
+    list of (float, ndarray of bool)
+        Per family its direction (radians, in [0, pi)) and which segments
+        belong to it; empty when the segments form no clear families (gyroid,
+        concentric: fewer than 85 % of the length in families).
+    """
+    if len(fill) < 4:
+        return []
+    d = fill[:, 1] - fill[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    ang = np.mod(np.degrees(np.arctan2(d[:, 1], d[:, 0])), 180.0)
+    bins = np.round(ang / 2.0).astype(int) % 90
+    weight = np.bincount(bins, weights=length, minlength=90)
+    total = weight.sum()
+    if total <= 0:
+        return []
+    # A direction can straddle two 2-degree bins: smooth, then take local maxima as families.
+    smooth = weight + np.roll(weight, 1) + np.roll(weight, -1)
+    peak = (smooth > min_share * total) & (smooth >= np.roll(smooth, 1)) & (smooth > np.roll(smooth, -1))
+    out = []
+    covered = np.zeros(len(fill), dtype=bool)
+    for fam in np.flatnonzero(peak):
+        delta = np.abs(np.mod(ang - 2.0 * fam + 90.0, 180.0) - 90.0)
+        member = (delta <= 3.5) & ~covered
+        if not member.any():
             continue
-        x0, x1 = minx + first * step, minx + stop * step
-        y0, y1 = miny + rows * step, miny + (rows + 1) * step
-        cells = unary_union([Polygon([(a, c), (b, c), (b, d), (a, d)])
-                             for a, b, c, d in zip(x0.tolist(), x1.tolist(), y0.tolist(), y1.tolist(), strict=True)])
-        out[k] = to_multipolygon(cells.intersection(area))
+        covered |= member
+        # Mean direction of the members (doubled angles: 179 and 1 degrees average to 0).
+        doubled = np.radians(2.0 * ang[member])
+        theta = 0.5 * np.arctan2((length[member] * np.sin(doubled)).sum(), (length[member] * np.cos(doubled)).sum())
+        out.append((float(np.mod(theta, np.pi)), member))
+    if not out or len(out) > max_families or length[covered].sum() < 0.85 * total:
+        return []
     return out
+
+
+def between_lines(fill: np.ndarray, max_gap_factor: float = 1.6):
+    """The area swept between neighbouring parallel lines, bounded by chords through their ends.
+
+    Cura clips each family of parallel infill lines to the infill area, so
+    the ends of neighbouring lines lie on the area's border: the chord
+    between them follows a straight border exactly (where the nearest-line
+    split of `split_by_lines` is biased by the spacings).  For each family,
+    every pair of overlapping pieces on neighbouring lines (at most
+    `max_gap_factor` x the family's spacing apart) spans a quadrilateral;
+    the union of all of them is returned.
+
+    Parameters
+    ----------
+    fill : ndarray, shape (k, 2, 2)
+        One mesh's FILL segments, mm.
+
+    Returns
+    -------
+    MultiPolygon or None
+        None when the lines form no clear families.
+    """
+    families = line_families(fill)
+    if not families:
+        return None
+    quads = []
+    for theta, member in families:
+        u = np.array([np.cos(theta), np.sin(theta)])
+        n = np.array([-u[1], u[0]])
+        seg = fill[member]
+        offset = 0.5 * (seg[:, 0] + seg[:, 1]) @ n
+        along = seg @ u  # (m, 2)
+        lo, hi = along.min(axis=1), along.max(axis=1)
+        order = np.lexsort((lo, offset))
+        offset, lo, hi = offset[order], lo[order], hi[order]
+        # Pieces on one line share its offset (within 0.05 mm).
+        new_line = np.r_[True, np.diff(offset) > 0.05]
+        line_id = np.cumsum(new_line) - 1
+        line_off = offset[new_line]
+        if len(line_off) < 2:
+            continue
+        gaps = np.diff(line_off)
+        spacing = float(np.median(gaps))
+        starts = np.flatnonzero(new_line)
+        stops = np.r_[starts[1:], len(offset)]
+        for k in np.flatnonzero(gaps <= max_gap_factor * spacing):
+            a = slice(starts[k], stops[k])
+            b = slice(starts[k + 1], stops[k + 1])
+            # Pieces of the two lines whose along-ranges overlap face each other.
+            pair = (lo[a][:, None] < hi[b][None, :]) & (lo[b][None, :] < hi[a][:, None])
+            ia, ib = np.nonzero(pair)
+            if ia.size == 0:
+                continue
+            la, ha = lo[a][ia], hi[a][ia]
+            lb, hb = lo[b][ib], hi[b][ib]
+            oa, ob = line_off[k], line_off[k + 1]
+            corners = np.stack([
+                np.outer(la, u) + oa * n, np.outer(ha, u) + oa * n,
+                np.outer(hb, u) + ob * n, np.outer(lb, u) + ob * n,
+            ], axis=1)
+            quads.extend(Polygon(c) for c in corners.tolist())
+        del line_id
+    if not quads:
+        return None
+    return to_multipolygon(unary_union(quads))
+
+
+def _distance_to(area, pts: np.ndarray, step: float = 0.1) -> np.ndarray:
+    """Distance (mm) from points (p, 2) to `area`: 0 inside, else to its boundary (to within `step`)."""
+    edges = boundary_segments(area)
+    if len(edges) == 0:
+        return np.full(len(pts), np.inf)
+    dist = cKDTree(sample_segments(edges, step)).query(pts)[0]
+    return np.where(contains_xy(area, pts[:, 0], pts[:, 1]), 0.0, dist)
+
+
+def _border_ends(fills: list[np.ndarray], grid: _OwnerGrid, owns: list, area, end_inset: float,
+                 probe: float, reach: list[float]) -> list[np.ndarray]:
+    """Per mesh k >= 1: the line ends of the other meshes that lie on its border, mm (p, 2).
+
+    Each line is continued `probe` mm beyond its end; ends whose continuation
+    leaves `area` lie on its outer border and are never counted.  The host's
+    lines (j = 0) end only on its outer border or on a modifier's border:
+    such an end goes to the modifier whose lines' span (`owns`) is nearest,
+    within `reach[k]` mm.  A modifier's line end goes to modifier k when its
+    continuation runs into k's nearest-line part (`grid`); it ends
+    `end_inset` before the border and is moved there.
+    """
+    out = [np.zeros((0, 2)) for _ in fills]
+    for j, fill in enumerate(fills):
+        if len(fill) == 0:
+            continue
+        d = fill[:, 1] - fill[:, 0]
+        length = np.hypot(d[:, 0], d[:, 1])
+        ok = length > 1e-6
+        u = d[ok] / length[ok, None]
+        ends = np.concatenate([fill[ok, 1], fill[ok, 0]])
+        outward = np.concatenate([u, -u])
+        beyond = ends + probe * outward
+        inside = contains_xy(area, beyond[:, 0], beyond[:, 1])
+        if not inside.any():
+            continue
+        ends, outward, beyond = ends[inside], outward[inside], beyond[inside]
+        if j == 0:
+            dist = np.full((len(fills), len(ends)), np.inf)
+            for k in range(1, len(fills)):
+                if owns[k] is not None and not owns[k].is_empty:
+                    dist[k] = _distance_to(owns[k], beyond)
+                    dist[k][dist[k] > reach[k]] = np.inf
+            best = np.argmin(dist, axis=0)
+            found = np.isfinite(dist[best, np.arange(len(ends))])
+            for k in range(1, len(fills)):
+                sel = found & (best == k)
+                out[k] = np.concatenate([out[k], ends[sel]])
+            continue
+        border = ends + end_inset * outward
+        owner = grid.at(beyond)
+        for k in range(1, len(fills)):
+            hit = (owner == k) if k != j else np.zeros(len(owner), dtype=bool)
+            if hit.any():
+                out[k] = np.concatenate([out[k], border[hit]])
+    return out
+
+
+def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end_inset: float,
+                       step: float = 0.5, convex_fill: float = 0.8) -> list:
+    """Split `area` between a host (index 0) and its infill-mesh modifiers by where their lines end.
+
+    Cura clips every mesh's infill lines to its own area, so line ends mark
+    the borders between meshes; a nearest-line split (`split_by_lines`)
+    puts the border up to half a spacing off, which biases a region's
+    density.  Each modifier gets:
+
+    * where its lines end: the area between its neighbouring lines
+      (`between_lines`) grown by `end_inset` (Cura ends infill lines that far
+      inside their area: half a line width minus the infill overlap), plus
+      the ends of the other meshes' lines that meet its border
+      (`_border_ends`);
+    * the convex hull of those (inside `area`) when the area between its
+      lines fills at least `convex_fill` of it: sparse lines cut a convex
+      corner by up to a spacing, the hull does not;
+    * otherwise the area between its lines plus what its nearest-line part
+      adds where no other mesh's lines span.
+
+    Later modifiers win where they overlap; the host gets the rest.  Meshes
+    whose lines form no families (gyroid, concentric) keep the nearest-line
+    split.
+
+    Parameters
+    ----------
+    area : (Multi)Polygon
+        The host's infill area (includes the modifiers' parts).
+    fills : list of ndarray, each shape (k, 2, 2)
+        Cura's FILL segments per mesh, index 0 the host, mm.
+    spacings : list of float
+        Line spacing per mesh, mm (for the nearest-line split).
+    end_inset : float
+        How far inside its area a line ends, mm.
+    step : float
+        Grid step of the nearest-line split, mm.
+    convex_fill : float
+        Share of its hull the lines must span for the hull to be taken.
+
+    Returns
+    -------
+    list of MultiPolygon
+        One per mesh, in the order given (index 0 the host's part).
+    """
+    if len(fills) < 2:
+        return split_by_lines(area, fills, spacings, step=step)
+    grid = _owner_grid(area, fills, spacings, step)
+    if grid is None:
+        return [empty_area() for _ in fills]
+    spans = [between_lines(f) if len(f) else None for f in fills]
+    owns = [None] + [None if sp is None else to_multipolygon(sp.buffer(end_inset, 4).intersection(area))
+                     for sp in spans[1:]]
+    ends = _border_ends(fills, grid, owns, area, end_inset, probe=max(4 * end_inset, 2 * step),
+                        reach=list(spacings))
+    centres = grid.centres()
+    inside_span = [None if sp is None else contains_xy(sp, centres[..., 0].ravel(), centres[..., 1].ravel()).reshape(grid.owner.shape)
+                   for sp in spans]
+    children = []
+    for k in range(1, len(fills)):
+        own = owns[k]
+        mine = grid.owner == k
+        if own is None or own.is_empty:
+            children.append(to_multipolygon(grid.polygon(mine).intersection(area)) if mine.any() else empty_area())
+            continue
+        # The rest of the nearest-line part: where no other mesh's lines span.
+        for j, covered in enumerate(inside_span):
+            if j != k and covered is not None:
+                mine = mine & ~covered
+        rest = grid.polygon(mine) if mine.any() else empty_area()
+        corners = np.concatenate([np.concatenate([np.asarray(p.exterior.coords) for p in polygons_of(own)]), ends[k]])
+        hull = MultiPoint(corners.tolist()).convex_hull.intersection(area)
+        if own.area >= convex_fill * hull.area:
+            own = hull
+        children.append(to_multipolygon(unary_union([own, rest]).intersection(area)))
+    # Later modifiers win where they overlap.
+    claimed = None
+    for k in range(len(children) - 1, -1, -1):
+        part = children[k]
+        if claimed is not None:
+            part = to_multipolygon(part.difference(claimed))
+        claimed = children[k] if claimed is None else unary_union([claimed, children[k]])
+        children[k] = part
+    if claimed is None:
+        return [to_multipolygon(area), *children]
+    host = to_multipolygon(area.difference(claimed))
+    # Strips of the host narrower than its line spacing left between modifiers are
+    # estimation slivers, not a zone the host's density could fill: the nearest modifier takes each.
+    width = 0.5 * spacings[0]
+    core = to_multipolygon(host.buffer(-width, 4).buffer(width, 4).intersection(host))
+    slivers = [p for p in polygons_of(host.difference(core)) if p.area > 1e-9]
+    if slivers and any(not c.is_empty for c in children):
+        grown = [[] for _ in children]
+        for piece in slivers:
+            dist = [piece.distance(c) if not c.is_empty else np.inf for c in children]
+            k = int(np.argmin(dist))
+            if dist[k] <= 1e-6 + 0.1 * width:
+                grown[k].append(piece)
+        for k, extra in enumerate(grown):
+            if extra:
+                children[k] = to_multipolygon(unary_union([children[k], *extra]))
+        host = to_multipolygon(area.difference(unary_union(children)))
+    return [host, *children]
 
 
 class AreaCache:

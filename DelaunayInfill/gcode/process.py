@@ -20,8 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry import contains_xy, to_multipolygon, unary_union
-from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of, split_by_lines
+from ..geometry import contains_xy, polygons_of, to_multipolygon, unary_union
+from ..routing import clip_segments, order_paths
+from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of, split_by_line_ends
 from .emit import EmitParams, emit_block
 from .estimate import move_times, moves_time
 from .infer import e_per_mm, infill_density, wall_line_width
@@ -55,6 +56,7 @@ __all__ = [
 _TIME_ELAPSED = re.compile(r"^;TIME_ELAPSED:(-?[\d.]+)", re.M)
 _M204 = re.compile(r"^M204 [^\n;]*?S(\d+\.?\d*)", re.M)
 _DEFAULT_LINE_WIDTH = 0.4
+_RETRACT_TRAVEL_MM = 40.0  # a retraction and prime take about as long as this much travel
 
 
 # ----------------------------------------------------------------------------- survey
@@ -121,13 +123,25 @@ class PatternCache:
         self.entries: dict[tuple, list[tuple[object, list, object]]] = {}
         self.builds = 0
         self._covered: dict[int, object] = {}  # id(footprint) -> last area found inside it
+        self._same_memo: dict[tuple, bool] = {}
 
-    @staticmethod
-    def _same(a, b, line_width: float) -> bool:
+    def _same(self, a, b, line_width: float) -> bool:
+        if a is b:
+            return True
+        fa, fb = _fingerprint(a), _fingerprint(b)
+        if fa == fb:  # the same polygon rebuilt: no boolean operation needed
+            return True
         if abs(a.area - b.area) > 0.5 * max(a.area, b.area) + 1e-9:
             return False
-        tol = max(0.02 * max(a.area, b.area), 0.5 * line_width * max(a.length, b.length), 1e-6)
-        return a.symmetric_difference(b).area <= tol
+        key = (fa, fb, round(line_width, 4))
+        hit = self._same_memo.get(key)
+        if hit is None:
+            tol = max(0.02 * max(a.area, b.area), 0.5 * line_width * max(a.length, b.length), 1e-6)
+            hit = a.symmetric_difference(b).area <= tol
+            if len(self._same_memo) >= 4096:
+                self._same_memo.clear()
+            self._same_memo[key] = hit
+        return hit
 
     def _regions_match(self, cached: list, regions: list, line_width: float) -> bool:
         return len(cached) == len(regions) and all(
@@ -160,6 +174,27 @@ class PatternCache:
         bucket.insert(0, (footprint, regions, pattern))
         del bucket[self.per_key :]
         return pattern, footprint, regions
+
+
+_FINGERPRINTS: dict[int, tuple] = {}
+
+
+def _fingerprint(area) -> tuple:
+    """A cheap identity of a polygon: bounds, area, vertex count and a hash of its rounded coordinates.
+
+    Remembered per object (weakly: by id, checked against the object kept alongside).
+    """
+    hit = _FINGERPRINTS.get(id(area))
+    if hit is not None and hit[0] is area:
+        return hit[1]
+    coords = [np.asarray(ring.coords) for poly in polygons_of(area) for ring in (poly.exterior, *poly.interiors)]
+    flat = np.round(np.concatenate(coords), 3) if coords else np.zeros((0, 2))
+    digest = hashlib.blake2b(flat.tobytes(), digest_size=12).digest()
+    fp = (tuple(round(v, 3) for v in area.bounds) if not area.is_empty else (), round(area.area, 3), len(flat), digest)
+    if len(_FINGERPRINTS) >= 1024:
+        _FINGERPRINTS.clear()
+    _FINGERPRINTS[id(area)] = (area, fp)
+    return fp
 
 
 def _split_empty_regions(regions: list) -> tuple[list, object, list]:
@@ -226,6 +261,12 @@ class _Run:
         self.result_memo: dict[int, tuple] = {}
         self.cura_density: dict[str, float] = {}
         self.modifier_areas: dict[tuple, object] = {}
+        self.line_areas: dict[tuple, tuple] = {}
+        self.shares: dict[tuple, tuple] = {}
+        self.reach_density: dict[str, float] = {}
+        self.few_lines_density: dict[tuple, float] = {}
+        self.grown: dict[tuple, tuple] = {}
+        self.unions: dict[tuple, tuple] = {}
         self.xy_words: dict[int, tuple] = {}
         self.e_before: dict[int, float] = {}
         self.e_delta: dict[int, float] = {}
@@ -369,7 +410,15 @@ class _Run:
             return ms.density
         d = self.region_density.get(mesh)
         if d is None:
-            d = infill_density(fill, lw, area.area if area is not None else None) or 0.2
+            # Too few lines to trust for every layer: remembered for this layer's very lines only.
+            key = (mesh, lw, hashlib.blake2b(np.round(fill, 3).tobytes(), digest_size=12).digest(),
+                   None if area is None else round(area.area, 3))
+            d = self.few_lines_density.get(key)
+            if d is None:
+                d = infill_density(fill, lw, area.area if area is not None else None) or 0.2
+                if len(self.few_lines_density) >= 256:
+                    self.few_lines_density.clear()
+                self.few_lines_density[key] = d
             if len(fill) >= 12:
                 self.region_density[mesh] = d
         return d
@@ -386,6 +435,7 @@ class _Run:
                 fill_meshes.append(b.mesh)
         geo = {}
         lw_of = {}
+        overlap_of = {}
         for name in fill_meshes:
             lw = self._line_width(parse, name)
             lw_of[name] = lw
@@ -393,13 +443,17 @@ class _Run:
             overlap = ms.infill_overlap if ms is not None and ms.infill_overlap is not None else s.infill_overlap
             if overlap is None:
                 overlap = 0.1 * lw
-            guess = self.mesh_density.get(name) or self.region_density.get(name)
+            overlap_of[name] = overlap
+            guess = self.mesh_density.get(name) or self.region_density.get(name) or self.reach_density.get(name)
             if guess is None:
                 # Cura's own density of this mesh sets how far apart its FILL lines are.
                 fill_now = parse.moves
                 sel = parse.mesh_mask(name) & (fill_now["kind"] == FILL) & (fill_now["de"] > 0)
                 segs = segments_of(fill_now, sel)
-                guess = infill_density(segs, lw) or 0.2
+                guess = infill_density(segs, lw)
+                if guess is not None:
+                    self.reach_density[name] = guess  # only sets a closing radius: the first estimate will do
+                guess = guess or 0.2
             reach = min(25.0, max(2 * lw, 1.5 * lw / max(guess, 0.04)))
             geo[name] = mesh_layer(parse, name, lw, overlap, reach, self.area_cache)
 
@@ -414,7 +468,7 @@ class _Run:
             for host in hosts:
                 if host == name:
                     continue
-                if fraction_inside(geo[name].fill, geo[host].part.buffer(lw_of[host]), lw_of[host]) >= 0.9:
+                if fraction_inside(geo[name].fill, self._grown(geo[host].part, lw_of[host]), lw_of[host]) >= 0.9:
                     parent_of[name] = host
                     break
         normal = [n for n in fill_meshes if s.enabled(n) and n not in parent_of]
@@ -439,7 +493,7 @@ class _Run:
             child_areas = []
             covered_children = set()  # modifiers whose area the host's pattern fills
             given = {r[2] for r in region_list}
-            for c, ca in zip(children, self._modifier_areas(name, children, geo, lw) if children else [], strict=True):
+            for c, ca in zip(children, self._modifier_areas(name, children, geo, lw, overlap_of[name]) if children else [], strict=True):
                 if ca.is_empty:
                     continue
                 covered_children.add(c)
@@ -450,7 +504,7 @@ class _Run:
                 child_areas.append(ca)
                 region_list.append((ca, self._region_mesh_density(c, geo[c].fill, lw_of[c], ca), f"mesh {c}"))
             if child_areas:
-                area = to_multipolygon(unary_union([area, *child_areas]))
+                area = self._union([area, *child_areas])
             if area.is_empty:
                 continue
             density = self._density_of(name, g.fill, lw, area)
@@ -462,34 +516,31 @@ class _Run:
             if empty is not None:
                 area = to_multipolygon(area.difference(empty))
             my_blocks = [i for i, b in enumerate(blocks) if b.has_moves and (b.mesh == name or b.mesh in children)]
+            # Every FILL block of the host and its modifiers may carry new paths, travel-only ones too
+            # (Cura's hops between its blocks): a path printed on the way costs no travel.
+            fill_blocks = [bi for bi in my_blocks if not blocks[bi].unsupported] or my_blocks[:1]
             if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
                 paths, used_regions = [], []
             else:
                 pattern, footprint, used_regions = self.patterns.get(name, area, density, lw, region_list)
-                first = blocks[my_blocks[0]].before
+                first = blocks[fill_blocks[0]].before
                 start = (first.x, first.y) if math.isfinite(first.x) else None
-                result = self._clip(pattern, area, start)
+                result = self._clip(pattern, self._line_area(area, lw, overlap_of[name]), start)
                 paths = self._paths(result)
                 self._measure(result, paths, area, density, used_regions, lw)
             for part, zname in empty_parts:
                 self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
-            # Each new path goes to the Cura FILL block nearest to its start.
-            fill_segments = np.concatenate([geo[n].fill for n in [name, *children]]) if any(len(geo[n].fill) for n in [name, *children]) else np.zeros((0, 2, 2))
-            fill_owner = np.concatenate([geo[n].fill_block for n in [name, *children]]) if len(fill_segments) else np.zeros(0, dtype=int)
-            assigned: dict[int, list[np.ndarray]] = {i: [] for i in my_blocks}
-            if paths and len(my_blocks) == 1:
-                assigned[my_blocks[0]] = list(paths)
-            elif paths and len(fill_segments):
-                pts = sample_segments(fill_segments, max(lw, 0.5))
-                d = fill_segments[:, 1] - fill_segments[:, 0]
-                n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / max(lw, 0.5)).astype(np.int64)) + 1
-                owner = np.repeat(fill_owner, n)
-                _, nearest = cKDTree(pts).query(np.array([p[0] for p in paths]))
-                for p, blk in zip(paths, owner[nearest], strict=True):
-                    assigned.setdefault(int(blk), []).append(p)
-            elif paths:
-                assigned[my_blocks[0]] = paths
             travel_part = g.part if g.part is not None else area.buffer(lw / 2)
+            assigned: dict[int, list[np.ndarray]] = {i: [] for i in my_blocks}
+            if paths and len(fill_blocks) == 1:
+                assigned[fill_blocks[0]] = list(paths)
+            elif paths:
+                # The host's and its modifiers' FILL blocks share the layer's route in runs of
+                # consecutive paths, cut where the least travel is added (`_plan_runs`): the route
+                # keeps its order, Cura's blocks keep theirs.  A travel that leaves the part is
+                # retracted (when Cura retracts): it costs about as much as this much more travel.
+                penalty = _RETRACT_TRAVEL_MM if retraction.seen else 0.0
+                self._share_paths(paths, fill_blocks, blocks, travel_part, penalty, assigned)
             # A block that got no new path keeps Cura's infill only where the new pattern leaves a gap.
             reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
             new_tree = None
@@ -499,8 +550,8 @@ class _Run:
                 had_fill = bool((mask & extr).any())
                 new_paths = assigned.get(bi, [])
                 if had_fill and not new_paths and paths and blk.mesh in covered_children:
-                    # The host's seamless pattern fills this modifier's area (its paths went to
-                    # nearer blocks): keeping Cura's lines here would print the region twice.
+                    # The host's seamless pattern fills this modifier's area (printed from other
+                    # blocks): keeping Cura's lines here would print it twice.
                     had_fill = False
                 elif not blk.unsupported and not new_paths and had_fill and (paths or empty is not None):
                     probe = sample_segments(segments_of(m, mask & extr), 2.0)
@@ -578,6 +629,60 @@ class _Run:
         out_lines.extend(lines[pos:])
         return out_lines, dt, stats
 
+    def _share_paths(self, paths, fill_blocks: list[int], blocks, part, penalty: float, assigned: dict) -> None:
+        """Cut the layer's route into one run of consecutive paths per Cura FILL block (`_plan_runs`).
+
+        Remembered per clip result (a prism's layers share their paths and blocks).
+        """
+        ends = tuple((blocks[b].before.x, blocks[b].before.y, blocks[b].after.x, blocks[b].after.y) for b in fill_blocks)
+        key = (id(paths), id(part), penalty, tuple(fill_blocks), tuple(round(v, 2) for e in ends for v in e))
+        hit = self.shares.get(key)
+        if hit is None or hit[0] is not paths or hit[1] is not part:
+            cost = _TravelCost(part, penalty)
+            hit = (paths, part, _plan_runs(list(paths), np.array(ends, dtype=float), cost))
+            if len(self.shares) >= 16:
+                self.shares.pop(next(iter(self.shares)))
+            self.shares[key] = hit
+        for bi, run in zip(fill_blocks, hit[2], strict=True):
+            assigned[bi] = list(run)
+
+    def _grown(self, area, by: float):
+        """`area` buffered by `by` mm, remembered (the same part object comes back layer after layer)."""
+        key = (id(area), round(by, 6))
+        hit = self.grown.get(key)
+        if hit is None or hit[0] is not area:
+            hit = (area, area.buffer(by))
+            if len(self.grown) >= 64:
+                self.grown.pop(next(iter(self.grown)))
+            self.grown[key] = hit
+        return hit[1]
+
+    def _union(self, areas: list):
+        """The union of areas, remembered by the objects (cached areas repeat layer after layer)."""
+        key = tuple(id(a) for a in areas)
+        hit = self.unions.get(key)
+        if hit is None or any(a is not b for a, b in zip(hit[0], areas, strict=True)):
+            hit = (list(areas), to_multipolygon(unary_union(areas)))
+            if len(self.unions) >= 32:
+                self.unions.pop(next(iter(self.unions)))
+            self.unions[key] = hit
+        return hit[1]
+
+    def _line_area(self, area, lw: float, overlap: float):
+        """Where new lines may run: `area` shrunk by half a line width less the overlap (remembered)."""
+        inset = lw / 2 - overlap
+        if inset <= 1e-6:
+            return area
+        key = (round(area.area, 6), round(area.length, 6), area.bounds, round(inset, 6))
+        hit = self.line_areas.get(key)
+        if hit is None or hit[0] is not area:
+            inner = to_multipolygon(area.buffer(-inset, 4))
+            hit = (area, inner if not inner.is_empty else area)
+            if len(self.line_areas) >= 16:
+                self.line_areas.pop(next(iter(self.line_areas)))
+            self.line_areas[key] = hit
+        return hit[1]
+
     def _cura_density(self, mesh: str, fill: np.ndarray, lw: float) -> float:
         """Cura's own density of a mesh (from its FILL spacing), remembered."""
         d = self.cura_density.get(mesh)
@@ -587,12 +692,18 @@ class _Run:
                 self.cura_density[mesh] = d
         return d
 
-    def _modifier_areas(self, host: str, children: list[str], geo: dict, lw: float) -> list:
-        """Areas of a host's infill-mesh modifiers in this layer (one split of the host's area)."""
+    def _modifier_areas(self, host: str, children: list[str], geo: dict, lw: float, overlap: float) -> list:
+        """Areas of a host's infill-mesh modifiers in this layer (one split of the host's area).
+
+        Cura ends infill lines half a line width minus the infill overlap
+        inside their area, so the modifiers' borders are found from where
+        their lines end (`split_by_line_ends`).
+        """
         names = [host, *children]
         h = hashlib.blake2b(digest_size=16)
         for n in names:
             h.update(n.encode() + b"|" + np.round(geo[n].fill, 3).tobytes() + b"|")
+        h.update(np.array([lw, overlap]).tobytes())
         key = h.digest()
         hit = self.modifier_areas.get(key)
         if hit is not None:
@@ -602,7 +713,8 @@ class _Run:
         if host_geo.part is not None:
             area = to_multipolygon(area.intersection(host_geo.part.buffer(lw / 2, 4)))
         spacings = [lw / self._cura_density(n, geo[n].fill, lw) for n in names]
-        parts = split_by_lines(area, [geo[n].fill for n in names], spacings, step=max(lw, 0.25))[1:]
+        end_inset = max(0.0, lw / 2 - overlap)
+        parts = split_by_line_ends(area, [geo[n].fill for n in names], spacings, end_inset, step=max(lw, 0.25))[1:]
         if len(self.modifier_areas) > 64:
             self.modifier_areas.clear()
         self.modifier_areas[key] = parts
@@ -630,12 +742,47 @@ class _Run:
             self.result_memo[id(result)] = hit
         return hit[1]
 
-    def _zone_lengths(self, result, paths, regions, lw) -> np.ndarray:
-        """New infill length per zone (index k: regions[k], last: base), remembered per clip result."""
-        memo = self.result_memo[id(result)][2]
-        key = (tuple(id(r) for r in regions), lw)
-        hit = memo.get(key)
+    def _zones(self, area, regions, lw):
+        """Each zone's interior and its area: index k regions[k], last the base (cached per area and regions).
+
+        A zone's interior leaves out a band of one line width along its border:
+        along other zones the pattern changes from one density to the other
+        (the engine calibrates the interiors), along the part's outline the
+        lines end (like Cura's, half a line width less the overlap before it).
+        A zone the band would (nearly) swallow is measured whole.
+        """
+        key = (round(area.area, 6), round(area.length, 6), area.bounds, tuple(id(r) for r in regions), round(lw, 4))
+        hit = self.zone_areas.get(key)
         if hit is not None and all(a is b for a, b in zip(hit[0], regions, strict=True)):
+            return hit[1]
+        owns = [None] * len(regions)
+        later = None
+        for k in range(len(regions) - 1, -1, -1):
+            a = regions[k][0]
+            own = a.intersection(area)
+            if later is not None:
+                own = own.difference(later)
+            later = a if later is None else later.union(a)
+            owns[k] = to_multipolygon(own)
+        owns.append(to_multipolygon(area.difference(later)) if later is not None else to_multipolygon(area))
+        inner = list(owns)
+        for k, own in enumerate(owns):
+            if own.area > 0:
+                core = to_multipolygon(own.buffer(-lw, 4))
+                if core.area >= 0.3 * own.area:
+                    inner[k] = core
+        zones = (inner, [z.area for z in inner])
+        if len(self.zone_areas) > 256:
+            self.zone_areas.clear()
+        self.zone_areas[key] = ([r for r in regions], zones)  # holding them keeps the ids valid
+        return zones
+
+    def _zone_lengths(self, result, paths, zones, lw) -> np.ndarray:
+        """New infill length inside each zone interior, remembered per clip result and zones."""
+        memo = self.result_memo[id(result)][2]
+        key = (id(zones), lw)
+        hit = memo.get(key)
+        if hit is not None and hit[0] is zones:
             return hit[1]
         segs = np.concatenate([np.stack([p[:-1], p[1:]], axis=1) for p in paths])
         step = max(lw / 2, 0.1)
@@ -644,41 +791,25 @@ class _Run:
         n = np.maximum(1, np.ceil(seg_len / step).astype(np.int64)) + 1
         pts = sample_segments(segs, step)
         weight = np.repeat(seg_len / n, n)
-        owner = np.full(len(pts), len(regions))
-        for k, (a, _, _) in enumerate(regions):
-            owner[contains_xy(a, pts[:, 0], pts[:, 1])] = k
-        lengths = np.bincount(owner, weights=weight, minlength=len(regions) + 1)
-        memo[key] = (list(regions), lengths)
+        owner = np.full(len(pts), len(zones))  # len(zones): in no interior (a border band)
+        for k, zone in enumerate(zones):
+            free = owner == len(zones)
+            if zone.area > 0 and free.any():
+                idx = np.flatnonzero(free)
+                owner[idx[contains_xy(zone, pts[idx, 0], pts[idx, 1])]] = k
+        lengths = np.bincount(owner, weights=weight, minlength=len(zones) + 1)[: len(zones)]
+        memo[key] = (zones, lengths)
         return lengths
 
     def _measure(self, result, paths, area, base_density, regions, lw) -> None:
         """Accumulate new infill length x line width and area per density region (later regions win)."""
         if not paths:
             return
-        lengths = self._zone_lengths(result, paths, regions, lw)
-        # Zone areas repeat layer after layer (prisms): cache them by a fingerprint of the inputs.
-        key = (round(area.area, 6), round(area.length, 6), area.bounds, tuple(id(r) for r in regions))
-        hit = self.zone_areas.get(key)
-        areas = hit[1] if hit is not None and all(a is b for a, b in zip(hit[0], regions, strict=True)) else None
-        if areas is None:
-            areas = [0.0] * len(regions)
-            later = None
-            for k in range(len(regions) - 1, -1, -1):
-                a = regions[k][0]
-                own = a.intersection(area)
-                if later is not None:
-                    own = own.difference(later)
-                later = a if later is None else later.union(a)
-                areas[k] = own.area
-            base_area = area.difference(later).area if later is not None else area.area
-            areas = (areas, base_area)
-            if len(self.zone_areas) > 256:
-                self.zone_areas.clear()
-            self.zone_areas[key] = ([r for r in regions], areas)  # holding them keeps the ids valid
-        areas, base_area = areas
+        zones, areas = self._zones(area, regions, lw)
+        lengths = self._zone_lengths(result, paths, zones, lw)
         for k, (_, dens, name) in enumerate(regions):
             self._tally(name, dens, float(lengths[k]) * lw, areas[k])
-        self._tally("base", base_density, float(lengths[-1]) * lw, base_area)
+        self._tally("base", base_density, float(lengths[-1]) * lw, areas[-1])
 
     # ------------------------------------------------------------------ header
     def finish(self, header: str) -> str:
@@ -696,6 +827,183 @@ class _Run:
             measured = t.length / t.area if t.area > 1e-9 else float("nan")
             r.regions.append(RegionReport(name, t.target, measured, t.area))
         return patch_header(header, self.time_delta, self.e_before, self.e_delta, self.s, volumetric=self.info.volumetric)
+
+
+class _TravelCost:
+    """Cost of straight travels: their length, plus `penalty` mm for each that leaves `part`."""
+
+    def __init__(self, part, penalty: float):
+        self.part = part
+        self.penalty = penalty
+
+    def __call__(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """Cost (mm) of the travels starts[i] -> ends[i], each (k, 2); unknown (NaN) points cost 0."""
+        starts = np.broadcast_to(np.asarray(starts, dtype=float).reshape(-1, 2), np.shape(ends)).reshape(-1, 2)
+        ends = np.asarray(ends, dtype=float).reshape(-1, 2)
+        d = np.hypot(*(ends - starts).T)
+        known = np.isfinite(d)
+        cost = np.where(known, d, 0.0)
+        if self.penalty <= 0 or self.part is None or not known.any():
+            return cost
+        idx = np.flatnonzero(known & (d > 1e-9))
+        segs = np.stack([starts[idx], ends[idx]], axis=1)
+        pieces, source = clip_segments(segs, self.part, return_index=True)
+        inside = np.bincount(source, np.hypot(*(pieces[:, 1] - pieces[:, 0]).T), len(idx))
+        cost[idx] += np.where(inside >= d[idx] - 1e-6, 0.0, self.penalty)
+        return cost
+
+
+def _plan_runs(paths: list[np.ndarray], ends: np.ndarray, cost_of, rounds: int = 3) -> list[list[np.ndarray]]:
+    """Share an ordered route among blocks that start and end at given points, with little travel.
+
+    The blocks keep Cura's order, and each must start and end where Cura's
+    did.  Each round cuts the route where the added travel is least
+    (`_route_cuts`; a block may get no path: it is then one travel), then
+    re-routes each run from its block's start (or back from its end) when
+    that is shorter; the runs joined are the next round's route.
+
+    Parameters
+    ----------
+    paths : list of ndarray, each (m, 2)
+        The layer's paths in print order, mm.
+    ends : ndarray, shape (b, 4)
+        Per block in print order: start x, y and end x, y (NaN: unknown).
+    cost_of : callable(starts (k, 2), ends (k, 2)) -> ndarray (k,)
+        Cost of straight travels, mm (`_TravelCost`).
+
+    Returns
+    -------
+    list of list of ndarray
+        One run of paths per block.
+    """
+    best_runs, best_cost = None, math.inf
+    order = paths
+    for _ in range(rounds):
+        cuts = _route_cuts(order, ends, cost_of)
+        # Per block: its run as cut, routed forward from its start, and routed back from its end.
+        options = []
+        for i in range(len(ends)):
+            run = order[cuts[i] : cuts[i + 1]]
+            b = ends[i]
+            options.append([run])
+            if len(run) >= 2:
+                forward, _ = order_paths(run, (b[0], b[1]) if math.isfinite(b[0]) else None)
+                backward, _ = order_paths(run, (b[2], b[3]) if math.isfinite(b[2]) else None)
+                options[-1] += [forward, [p[::-1] for p in backward[::-1]]]
+        flat = [(run, ends[i]) for i, opts in enumerate(options) for run in opts]
+        costs = _runs_travel([r for r, _ in flat], [b for _, b in flat], cost_of)
+        runs, total, at = [], 0.0, 0
+        for opts in options:
+            pick = int(np.argmin(costs[at : at + len(opts)] - 1e-6 * (np.arange(len(opts)) == 0)))
+            runs.append(list(opts[pick]))
+            total += float(costs[at + pick])
+            at += len(opts)
+        if total >= best_cost - 1e-6:
+            break
+        best_runs, best_cost = runs, total
+        order = [p for r in runs for p in r]
+    return best_runs
+
+
+def _route_cuts(paths: list[np.ndarray], ends: np.ndarray, cost_of) -> np.ndarray:
+    """Where to cut an ordered route into runs for blocks that must start and end at given points.
+
+    Block i (in print order) starts at ``ends[i, :2]`` and must end at
+    ``ends[i, 2:]``; it prints paths ``cuts[i]:cuts[i + 1]`` (possibly none:
+    then it is one travel from its start to its end).  Dynamic programming
+    over the cut positions minimizes the total travel (straight lines), each
+    block's run costing the travel in, the travel between its paths and the
+    travel out; with prefix minima it is O(blocks x paths).
+
+    Parameters
+    ----------
+    paths : list of ndarray, each (m, 2)
+        The route, in order, mm.
+    ends : ndarray, shape (b, 4)
+        Per block: start x, y and end x, y (NaN: unknown, costs nothing).
+    cost_of : callable
+        Cost of straight travels (`_TravelCost`).
+
+    Returns
+    -------
+    ndarray of int, shape (b + 1,)
+        ``cuts[0] = 0``, ``cuts[-1] = len(paths)``, non-decreasing.
+    """
+    n, nb = len(paths), len(ends)
+    heads = np.array([p[0] for p in paths], dtype=float).reshape(-1, 2)
+    tails = np.array([p[-1] for p in paths], dtype=float).reshape(-1, 2)
+    # Every travel the programme may choose, costed at once: between paths, into each path from
+    # each block's start, out of each path to each block's end, and each block's own hop.
+    starts = np.concatenate([tails[:-1], np.repeat(ends[:, :2], n, axis=0), np.tile(tails, (nb, 1)), ends[:, :2]])
+    stops = np.concatenate([heads[1:], np.tile(heads, (nb, 1)), np.repeat(ends[:, 2:], n, axis=0), ends[:, 2:]])
+    every = cost_of(starts, stops)
+    gaps, rest = every[: max(n - 1, 0)], every[max(n - 1, 0) :]
+    enter_cost = rest[: nb * n].reshape(nb, n)
+    exit_cost = rest[nb * n : 2 * nb * n].reshape(nb, n)
+    hops = rest[2 * nb * n :]
+    inner = np.r_[0.0, np.cumsum(gaps)]  # inner[k]: travel between paths 0..k
+
+    # f[k]: least travel of the blocks so far when the next block's run starts at path k.
+    f = np.full(n + 1, np.inf)
+    f[0] = 0.0
+    choice = np.zeros((nb, n + 1), dtype=np.int64)
+    for i in range(nb):
+        hop = float(hops[i])
+        # Run k'..k-1: f[k'] + |start -> head k'| - inner[k'] + inner[k-1] + |tail k-1 -> stop|.
+        enter = f[:n] + enter_cost[i] - inner
+        best = np.minimum.accumulate(enter)
+        arg = _running_argmin(enter)
+        through = np.full(n + 1, np.inf)
+        through[1:] = best + inner + exit_cost[i]
+        empty = f + hop
+        use_run = through < empty
+        choice[i] = np.where(use_run, np.r_[0, arg], np.arange(n + 1))
+        f = np.where(use_run, through, empty)
+    if not np.isfinite(f[n]):
+        return np.r_[0, np.full(nb, n)]
+    cuts = np.zeros(nb + 1, dtype=np.int64)
+    cuts[nb] = n
+    k = n
+    for i in range(nb - 1, -1, -1):
+        k = int(choice[i, k])
+        cuts[i] = k
+    cuts[0] = 0
+    return cuts
+
+
+def _runs_travel(runs: list, ends: list, cost_of) -> np.ndarray:
+    """`_run_travel` of many (run, ends) pairs with one call of `cost_of`."""
+    starts, stops, owner = [], [], []
+    for k, (run, b) in enumerate(zip(runs, ends, strict=True)):
+        pts = np.concatenate([np.asarray(b[:2], dtype=float)[None]]
+                             + [np.stack([p[0], p[-1]]) for p in run]
+                             + [np.asarray(b[2:], dtype=float)[None]])
+        starts.append(pts[0::2])
+        stops.append(pts[1::2])
+        owner.append(np.full(len(pts) // 2, k))
+    costs = cost_of(np.concatenate(starts), np.concatenate(stops))
+    return np.bincount(np.concatenate(owner), costs, len(runs))
+
+
+def _run_travel(run: list[np.ndarray], ends, cost_of) -> float:
+    """Travel cost of a block printing `run`: in from ends[:2], between the paths, out to ends[2:] (mm).
+
+    With no path it is the travel from ends[:2] to ends[2:]; unknown (NaN) ends cost nothing.
+    """
+    pts = [np.asarray(ends[:2], dtype=float)]
+    for p in run:
+        pts += [p[0], p[-1]]
+    pts.append(np.asarray(ends[2:], dtype=float))
+    pts = np.array(pts).reshape(-1, 2, 2)
+    return float(cost_of(pts[:, 0], pts[:, 1]).sum())
+
+
+def _running_argmin(values: np.ndarray) -> np.ndarray:
+    """Index of the minimum of values[:k + 1] for every k."""
+    best = np.minimum.accumulate(values)
+    is_new = np.r_[True, values[1:] < best[:-1]]
+    idx = np.where(is_new, np.arange(len(values)), 0)
+    return np.maximum.accumulate(idx)
 
 
 def _time_lines(lines: list[str]) -> list[int]:

@@ -46,6 +46,22 @@ def _subdivide(segments: np.ndarray, max_length: float) -> np.ndarray:
     return np.stack([a + (b - a) * t0, a + (b - a) * t1], axis=1)
 
 
+_BOUNDARIES: dict[int, tuple] = {}  # id(area) -> (area, its boundary segments): areas are clipped against repeatedly
+_BRUTE_FORCE_PAIRS = 1024  # up to this many segment x boundary pairs, test them all (no k-d trees)
+
+
+def _boundary_of(area) -> np.ndarray:
+    """`boundary_segments(area)`, remembered for the last few areas (held, so their ids stay theirs)."""
+    hit = _BOUNDARIES.get(id(area))
+    if hit is not None and hit[0] is area:
+        return hit[1]
+    boundary = boundary_segments(area)
+    if len(_BOUNDARIES) >= 8:
+        _BOUNDARIES.clear()  # (clear, not evict one: safe if another thread clips at the same time)
+    _BOUNDARIES[id(area)] = (area, boundary)
+    return boundary
+
+
 def clip_segments(segments: np.ndarray, area, *, return_index: bool = False):
     """The parts of `segments` that lie inside `area`.
 
@@ -69,19 +85,25 @@ def clip_segments(segments: np.ndarray, area, *, return_index: bool = False):
     if len(segments) == 0 or area.is_empty:
         empty = np.zeros((0, 2, 2))
         return (empty, np.zeros(0, np.intp)) if return_index else empty
-    boundary = boundary_segments(area)
+    boundary = _boundary_of(area)
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
     longest = float(length.max()) if len(length) else 0.0
     ia = np.zeros(0, np.intp)
     ta = np.zeros(0)
     if len(boundary) and longest > 0:
         boundary = _subdivide(boundary, max(longest, 1e-3))
-        blen = np.hypot(*(boundary[:, 1] - boundary[:, 0]).T)
-        reach = 0.5 * (longest + float(blen.max())) + 1e-6
-        sdm = cKDTree(segments.mean(axis=1)).sparse_distance_matrix(
-            cKDTree(boundary.mean(axis=1)), reach, output_type="ndarray"
-        )
-        ia, ib = sdm["i"].astype(np.intp), sdm["j"].astype(np.intp)
+        if len(segments) * len(boundary) <= _BRUTE_FORCE_PAIRS:
+            # Few pairs: test them all.  Pairs the k-d trees would skip cannot intersect, so
+            # the crossings (and the result) are the same.
+            ia = np.repeat(np.arange(len(segments), dtype=np.intp), len(boundary))
+            ib = np.tile(np.arange(len(boundary), dtype=np.intp), len(segments))
+        else:
+            blen = np.hypot(*(boundary[:, 1] - boundary[:, 0]).T)
+            reach = 0.5 * (longest + float(blen.max())) + 1e-6
+            sdm = cKDTree(segments.mean(axis=1)).sparse_distance_matrix(
+                cKDTree(boundary.mean(axis=1)), reach, output_type="ndarray"
+            )
+            ia, ib = sdm["i"].astype(np.intp), sdm["j"].astype(np.intp)
         p, r = segments[ia, 0], segments[ia, 1] - segments[ia, 0]
         q, s = boundary[ib, 0], boundary[ib, 1] - boundary[ib, 0]
         denom = _cross(r, s)
@@ -92,8 +114,8 @@ def clip_segments(segments: np.ndarray, area, *, return_index: bool = False):
         hit = ok & (t > _EPS) & (t < 1 - _EPS) & (u >= -_EPS) & (u <= 1 + _EPS)
         ia, ta = ia[hit], t[hit]
     k = len(segments)
-    seg_id = np.r_[np.arange(k), np.arange(k), ia]
-    param = np.r_[np.zeros(k), np.ones(k), ta]
+    seg_id = np.concatenate((np.arange(k), np.arange(k), ia))
+    param = np.concatenate((np.zeros(k), np.ones(k), ta))
     order = np.lexsort((param, seg_id))
     seg_id, param = seg_id[order], param[order]
     same = seg_id[1:] == seg_id[:-1]

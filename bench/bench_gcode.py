@@ -21,9 +21,13 @@ infill), and this script's own estimate with one motion model for every file
 (trapezoid per move, 3000 mm/s^2, junction speed 0), so the four patterns
 are compared like for like.
 
+With ``--stages`` a third table splits one more ``process_gcode`` run (not
+the timed ones) into its stages: parsing, infill areas, pattern lookups and
+builds, clipping and routing, G-code writing, the rest.
+
 Usage::
 
-    python3 bench/bench_gcode.py [--density PCT] [--models cube,hbracket,star,star_regions] [--out DIR]
+    python3 bench/bench_gcode.py [--density PCT] [--models cube,hbracket,star,star_regions] [--out DIR] [--stages]
 """
 
 from __future__ import annotations
@@ -45,6 +49,14 @@ PATTERNS = ("grid", "triangles", "lines")
 _MOVE = re.compile(r"^(G[01])\b([^;\n]*)", re.M)
 _WORDS = re.compile(r"([XYZEF])(-?\d*\.?\d+)")
 ACCELERATION = 3000.0  # mm/s^2, for this script's own time estimate
+# (label, module, attribute) of the pipeline stages timed with --stages; a missing one is left out
+STAGES = (
+    ("parse", "DelaunayInfill.gcode.process", "parse_layer"),
+    ("areas", "DelaunayInfill.gcode.process", "mesh_layer"),
+    ("patterns", "DelaunayInfill.gcode.process", "PatternCache.get"),
+    ("clip + route", "DelaunayInfill.gcode.process", "_Run._clip"),
+    ("write G-code", "DelaunayInfill.gcode.process", "emit_block"),
+)
 
 
 def _model_files(folder: str) -> dict[str, list]:
@@ -129,11 +141,47 @@ def split_like_cura(text: str) -> list[str]:
     return [p for p in parts if p]
 
 
-def run(model_names: list[str], density: float, out: str, repeats: int = 3) -> tuple[list, list]:
+def stage_times(chunks: list[str]) -> dict[str, float]:
+    """Seconds per pipeline stage (STAGES) in one ``process_gcode`` run; "total" and "other" too."""
+    import importlib
+
+    from DelaunayInfill import process_gcode
+
+    spent: dict[str, float] = {}
+    undo = []
+    for label, module_name, path in STAGES:
+        owner = importlib.import_module(module_name)
+        *parents, name = path.split(".")
+        for parent in parents:
+            owner = getattr(owner, parent, None)
+        original = getattr(owner, name, None) if owner is not None else None
+        if original is None:
+            continue
+
+        def timed(*args, _f=original, _label=label, **kwargs):
+            start = time.perf_counter()
+            try:
+                return _f(*args, **kwargs)
+            finally:
+                spent[_label] = spent.get(_label, 0.0) + time.perf_counter() - start
+
+        setattr(owner, name, timed)
+        undo.append((owner, name, original))
+    try:
+        start = time.perf_counter()
+        process_gcode(chunks)
+        total = time.perf_counter() - start
+    finally:
+        for owner, name, original in undo:
+            setattr(owner, name, original)
+    return {**spent, "total": total, "other": total - sum(spent.values())}
+
+
+def run(model_names: list[str], density: float, out: str, repeats: int = 3, stages: bool = False) -> tuple[list, list, list]:
     from DelaunayInfill import process_gcode
 
     files = _model_files(os.path.join(out, "models"))
-    speed_rows, output_rows = [], []
+    speed_rows, output_rows, stage_rows = [], [], []
     for name in model_names:
         meshes = files[name]
         slices = {}
@@ -161,16 +209,18 @@ def run(model_names: list[str], density: float, out: str, repeats: int = 3) -> t
         with open(os.path.join(out, f"{name}_delaunay.gcode"), "w", encoding="utf-8") as f:
             f.write(new_text)
         process_seconds, process_cpu = statistics.median(times), statistics.median(cpu_times)
+        if stages:
+            stage_rows.append((name, slice_seconds, stage_times(chunks)))
         speed_rows.append((name, grid_text.count("\n"), slice_seconds, process_seconds, process_seconds / slice_seconds,
                            slice_cpu, process_cpu, process_cpu / slice_cpu, len(report.failed_layers)))
         stats = {p: gcode_stats(slices[p][0]) for p in PATTERNS}
         stats["delaunay"] = gcode_stats(new_text)
         for pattern, s in stats.items():
             output_rows.append((name, pattern, s, stats["grid"], stats["triangles"]))
-    return speed_rows, output_rows
+    return speed_rows, output_rows, stage_rows
 
 
-def format_tables(speed_rows, output_rows, density) -> str:
+def format_tables(speed_rows, output_rows, density, stage_rows=()) -> str:
     out = [f"Density {density:g} %, 0.2 mm layers, 0.4 mm line width, CuraEngine {_engine_version()}.", ""]
     out += ["| model | G-code lines | CuraEngine slice, wall (s) | process_gcode, wall (s) | ratio (target <= 1.0) "
             "| CuraEngine CPU (s) | process_gcode CPU (s) | CPU ratio | failed layers |",
@@ -193,6 +243,15 @@ def format_tables(speed_rows, output_rows, density) -> str:
             f"{' (over)' if flag and abs(d_fil) > 3 else ''} | {s['time_s'] / 60:.1f} | {r_time:.3f}x"
             f"{' (over)' if flag and r_time > 1.05 else ''} | {s['file_time_s'] / 60:.1f} | {s['infill_travel_m']:.2f} | "
             f"{r_travel:.2f}x{' (over)' if flag and r_travel > 1.0 else ''} | {s['retractions']} |")
+    if stage_rows:
+        labels = [label for label, _, _ in STAGES]
+        out += ["", "One more process_gcode run split into stages (ms; the stages do not overlap):", "",
+                "| model | CuraEngine slice | process_gcode | " + " | ".join(labels) + " | other |",
+                "|---|" + "---:|" * (len(labels) + 3)]
+        for name, slice_seconds, spent in stage_rows:
+            cells = [f"{1e3 * spent[label]:.1f}" if label in spent else "-" for label in labels]
+            out.append(f"| {name} | {1e3 * slice_seconds:.1f} | {1e3 * spent['total']:.1f} | " + " | ".join(cells)
+                       + f" | {1e3 * spent['other']:.1f} |")
     return "\n".join(out)
 
 
@@ -216,6 +275,7 @@ def main(argv=None) -> int:
     parser.add_argument("--models", default="cube,hbracket,star,star_regions")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", default=None, help="keep the G-code files in this folder")
+    parser.add_argument("--stages", action="store_true", help="also time the pipeline's stages (one extra run)")
     args = parser.parse_args(argv)
     try:
         curaengine.find_curaengine()
@@ -227,8 +287,8 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or tmp
         os.makedirs(out, exist_ok=True)
-        speed, output = run(names, args.density, out, args.repeats)
-    print(format_tables(speed, output, args.density))
+        speed, output, stage_rows = run(names, args.density, out, args.repeats, args.stages)
+    print(format_tables(speed, output, args.density, stage_rows))
     return 0
 
 

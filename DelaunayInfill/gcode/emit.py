@@ -109,6 +109,105 @@ def _xy_words(paths: list[np.ndarray], cache: dict | None) -> list[str]:
     return out
 
 
+class _Template:
+    """What a block's paths and travel area give, whatever the machine state: computed once per
+    (paths, part) and reused while a prism's layers repeat the same clip result.
+
+    ``seg_len`` (m,) length of every extrusion move, mm; ``ext_first`` (n + 1,)
+    where each path's extrusion moves start in ``seg_len``/``xy`` (and the end);
+    ``xy`` the ``G1 X.. Y..`` word of every extrusion move; ``heads``/``tails``
+    path end points as Python floats, ``head_words`` the ``X.. Y..`` of each head;
+    ``inner_free`` (n - 1,) whether the travel from path k to path k + 1 stays
+    inside the part.
+    """
+
+    __slots__ = ("part", "paths", "heads", "tails", "seg_len", "ext_first", "xy", "inner_free", "heads_arr", "tails_arr",
+                 "head_words")
+
+    def __init__(self, paths: list[np.ndarray], params: EmitParams, start, end):
+        part = self.part = params.part
+        self.paths = tuple(paths)
+        sizes = np.array([len(p) for p in paths])
+        pts = np.concatenate(paths)
+        steps = np.diff(pts, axis=0)
+        lengths = np.hypot(steps[:, 0], steps[:, 1])
+        first = np.r_[0, np.cumsum(sizes)[:-1]]
+        is_ext = np.ones(len(pts), dtype=bool)
+        is_ext[first] = False  # a path's first point is reached by travel
+        self.seg_len = lengths[is_ext[1:]]  # step i ends at point i + 1
+        # extrusion lines of path k are xy[ext_first[k] : ext_first[k + 1]]
+        self.ext_first = (first - np.arange(len(paths))).tolist() + [len(self.seg_len)]
+        self.heads_arr = pts[first]
+        self.tails_arr = pts[first + sizes - 1]
+        self.heads = self.heads_arr.tolist()
+        self.tails = self.tails_arr.tolist()
+        self.head_words = [f"X{x:.3f} Y{y:.3f}" for x, y in self.heads]  # what a travel to each path writes
+        self.xy = _xy_words(paths, params.xy_words)
+        # every travel of the block in one test: from `start` to the first path, between the
+        # paths, from the last path to `end`; the first and last also go to the single-travel memo
+        free = _travels_inside(np.vstack([[start], self.tails_arr]), np.vstack([self.heads_arr, [end]]), part, params.step)
+        self.inner_free = free[1:-1]
+        (hx, hy), (tx, ty) = self.heads[0], self.tails[-1]
+        _remember_travel(start[0], start[1], hx, hy, params, bool(free[0]))
+        _remember_travel(tx, ty, end[0], end[1], params, bool(free[-1]))
+
+    def matches(self, paths: list[np.ndarray], part) -> bool:
+        return self.part is part and len(self.paths) == len(paths) and all(
+            a is b for a, b in zip(self.paths, paths, strict=True)
+        )
+
+
+def _template(paths: list[np.ndarray], params: EmitParams, start, end) -> _Template:
+    """The block template of `paths`, from ``params.xy_words`` when the same paths and part came before.
+
+    `start`, `end` (x, y): where the block starts and ends, for the travels to and from it.
+    """
+    cache = params.xy_words
+    if cache is None:
+        return _Template(paths, params, start, end)
+    templates = cache.setdefault(("block templates",), {})
+    key = (id(params.part), *map(id, paths))
+    hit = templates.get(key)
+    if hit is None or not hit.matches(paths, params.part):
+        hit = _Template(paths, params, start, end)
+        if len(templates) >= 32:
+            templates.pop(next(iter(templates)))
+        templates[key] = hit
+    return hit
+
+
+def _remember_travel(x0: float, y0: float, x1: float, y1: float, params: EmitParams, free: bool) -> None:
+    if params.xy_words is not None:
+        memo = params.xy_words.setdefault(("single travels",), {})
+        if len(memo) >= 256:
+            memo.pop(next(iter(memo)))
+        memo[(id(params.part), x0, y0, x1, y1)] = (params.part, free)
+
+
+def _travel_free(x0: float, y0: float, x1: float, y1: float, params: EmitParams) -> bool:
+    """`_travels_inside` for one travel, remembered by its exact end points (they repeat on prisms)."""
+    if params.xy_words is not None:
+        hit = params.xy_words.setdefault(("single travels",), {}).get((id(params.part), x0, y0, x1, y1))
+        if hit is not None and hit[0] is params.part:
+            return hit[1]
+    free = bool(_travels_inside(np.array([[x0, y0]]), np.array([[x1, y1]]), params.part, params.step)[0])
+    _remember_travel(x0, y0, x1, y1, params, free)
+    return free
+
+
+_FEED_WORDS: dict[float, str] = {}
+
+
+def _feed_word(f: float) -> str:
+    """``"F<f> "`` (a handful of feedrates come back all the time)."""
+    word = _FEED_WORDS.get(f)
+    if word is None:
+        if len(_FEED_WORDS) > 1024:
+            _FEED_WORDS.clear()
+        word = _FEED_WORDS[f] = f"F{fmt(f, 0)} "
+    return word
+
+
 class _Writer:
     def __init__(self, before: MachineState, params: EmitParams, result: EmitResult):
         self.x, self.y, self.z = before.x, before.y, before.z
@@ -144,7 +243,7 @@ class _Writer:
     def set_feed(self, f: float) -> str:
         if abs(f - self.f) > 1e-9:
             self.f = f
-            return f"F{fmt(f, 0)} "
+            return _feed_word(f)
         return ""
 
     def retract(self, amount: float | None = None):
@@ -201,48 +300,95 @@ class _Writer:
         self.out.travel_mm += d
         self.x, self.y = x, y
 
-    def extrude_all(self, paths: list[np.ndarray], free: np.ndarray):
-        """All paths with their travels; the extrusion lines are formatted in one pass."""
-        sizes = np.array([len(p) for p in paths])
-        pts = np.concatenate(paths)
-        first = np.r_[0, np.cumsum(sizes)[:-1]]
-        steps = np.diff(pts, axis=0)
-        lengths = np.hypot(steps[:, 0], steps[:, 1])
-        is_ext = np.ones(len(pts), dtype=bool)
-        is_ext[first] = False  # a path's first point is reached by travel
-        seg_len = lengths[is_ext[1:]]  # step i ends at point i + 1
-        de = seg_len * self.p.e_per_mm
+    def extrude_all(self, tpl: _Template, free: list[bool]):
+        """All paths of `tpl` with their travels before them.
+
+        The loop over paths only decides travels, retractions and feedrates;
+        the extrusion lines are formatted afterwards in one pass (their XY words
+        come from the template, their E values from one vectorized sum).
+        """
+        de = tpl.seg_len * self.p.e_per_mm
         cum = np.concatenate([[0.0], np.cumsum(de)])  # E extruded before each extrusion line
-        xy = _xy_words(paths, self.p.xy_words)
-        # extrusion lines of path k are xy[ext_first[k] : ext_first[k] + sizes[k] - 1]
-        ext_first = first - np.arange(len(paths))
+        cum_list = cum.tolist()
+        ext_first = tpl.ext_first
         lines = self.out.lines
-        for k, path in enumerate(paths):
-            self.travel(float(path[0, 0]), float(path[0, 1]), bool(free[k]))
+        print_f = self.p.print_f
+        relative = self.relative
+        marks: list[int] = []  # where each path's extrusion lines go in `lines`
+        feeds: list[str] = []
+        bases: list[float] = []  # the E register at each path's start (absolute E)
+        tails = tpl.tails
+        head_words = tpl.head_words
+        travel_f = self.p.travel_f
+        min_travel = self.p.min_travel
+        seen = self.r.seen
+        times_d, times_f = self._dist, self._feed
+        for k, (hx, hy) in enumerate(tpl.heads):
+            d = math.hypot(hx - self.x, hy - self.y)
+            if d < 1e-9:
+                pass
+            elif (free[k] or d < min_travel or not seen or self.depth > 1e-9 or self.fw) and math.isfinite(d):
+                # `travel` without a retraction, inline: most travels of a block are like this
+                if abs(travel_f - self.f) > 1e-9:
+                    self.f = travel_f
+                    lines.append("G0 " + _feed_word(travel_f) + head_words[k])
+                else:
+                    lines.append("G0 " + head_words[k])
+                times_d.append(d)
+                times_f.append(self.f)
+                self.out.travel_mm += d
+                self.x, self.y = hx, hy
+            else:
+                self.travel(hx, hy, free[k])
             if self.z != self.layer_z:
                 self.move_z(self.layer_z)
             if self.depth > 1e-9 or self.fw:
                 self.prime()
-            a = int(ext_first[k])
-            b = a + int(sizes[k]) - 1
+            a = ext_first[k]
+            b = ext_first[k + 1]
             if b <= a:
                 continue
             # E words from the register as it is now: a prime just above (the block may start
             # retracted) has moved it, so values computed before the loop would run backwards.
-            e_vals = de[a:b] if self.relative else self.e + (cum[a + 1 : b + 1] - cum[a])
-            words = [f"{w} E{e:.5f}" for w, e in zip(xy[a:b], e_vals.tolist(), strict=True)]
-            feed = self.set_feed(self.p.print_f)
-            if feed:
-                words[0] = "G1 " + feed + words[0][3:]
-            lines.extend(words)
-            if not self.relative:
-                self.e = float(e_vals[-1])
-            self.x, self.y = float(path[-1, 0]), float(path[-1, 1])
-        self.out.dist.append(seg_len)
-        self.out.feed.append(np.full(len(seg_len), self.p.print_f))
-        self.out.extruded_e += float(de.sum())
-        self.out.net_e += float(de.sum())
-        self.out.extrude_mm += float(seg_len.sum())
+            if abs(print_f - self.f) > 1e-9:
+                self.f = print_f
+                feeds.append(_feed_word(print_f))
+            else:
+                feeds.append("")
+            marks.append(len(lines))
+            if not relative:
+                bases.append(self.e)
+                self.e = self.e + (cum_list[b] - cum_list[a])
+            self.x, self.y = tails[k]
+        if marks:
+            counts = np.diff(ext_first)
+            counts = counts[counts > 0]
+            if relative:
+                e_vals = de
+            else:
+                starts = np.array(ext_first[:-1])[np.diff(ext_first) > 0]
+                e_vals = np.repeat(bases, counts) + (cum[1:] - np.repeat(cum[starts], counts))
+            words = [f"{w} E{e:.5f}" for w, e in zip(tpl.xy, e_vals.tolist(), strict=True)]
+            out: list[str] = lines[: marks[0]]
+            at = 0
+            for j, mark in enumerate(marks):
+                if j:
+                    out.extend(lines[marks[j - 1] : mark])
+                stop = at + int(counts[j])
+                if feeds[j]:
+                    out.append("G1 " + feeds[j] + words[at][3:])
+                    out.extend(words[at + 1 : stop])
+                else:
+                    out.extend(words[at:stop])
+                at = stop
+            out.extend(lines[marks[-1] :])
+            lines[:] = out
+        self.out.dist.append(tpl.seg_len)
+        self.out.feed.append(np.full(len(tpl.seg_len), print_f))
+        total_de = float(de.sum())
+        self.out.extruded_e += total_de
+        self.out.net_e += total_de
+        self.out.extrude_mm += float(tpl.seg_len.sum())
 
 
 def emit_block(
@@ -271,18 +417,18 @@ def emit_block(
     result = EmitResult(lines=list(extra_lines))
     w = _Writer(before, params, result)
     paths = [np.asarray(p, dtype=float) for p in paths if len(p) >= 2]
-    target = np.array([[after.x, after.y]])
     if paths:
-        # every travel of the block at once: before each path, and from the last path to Cura's end point
-        starts = np.array([p[0] for p in paths])
-        ends = np.array([p[-1] for p in paths])
-        free = _travels_inside(np.vstack([[before.x, before.y], ends]), np.vstack([starts, target]), params.part, params.step)
-        w.extrude_all(paths, free[:-1])
-        free_end = bool(free[-1])
+        # The travels between paths depend on the paths and the part only (cached with them);
+        # the first and the last depend on where Cura's block starts and ends.
+        tpl = _template(paths, params, (before.x, before.y), (after.x, after.y))
+        (hx, hy), (tx, ty) = tpl.heads[0], tpl.tails[-1]
+        free = [_travel_free(before.x, before.y, hx, hy, params), *tpl.inner_free.tolist()]
+        w.extrude_all(tpl, free)
+        free_end = _travel_free(tx, ty, after.x, after.y, params)
     else:
-        free_end = bool(_travels_inside(np.array([[w.x, w.y]]), target, params.part, params.step)[0])
+        free_end = _travel_free(w.x, w.y, after.x, after.y, params)
     # Hand back Cura's end state.
-    if np.isfinite(target).all():
+    if math.isfinite(after.x) and math.isfinite(after.y):
         w.travel(after.x, after.y, free_end)
     going_up = after.z > w.z + 1e-9
     if not going_up:

@@ -1,14 +1,21 @@
 """Reading Cura G-code: chunks, header facts, and one layer's moves and FILL blocks.
 
-A layer is parsed line by line once (a compiled regex per motion line); the
-result is numpy arrays of moves plus the list of ``;TYPE:FILL`` blocks, each
-with the machine state before and after it.  The machine state is carried
-from chunk to chunk, so the parser sees the file as one stream.
+A layer is parsed in one regex pass over its text (Cura's motion lines give
+their X/Y/Z/E/F words, in one order) and a few numpy operations; only the
+other lines (comments, commands, odd motion lines) are looked at one by one.
+The result is numpy arrays of moves plus the list of ``;TYPE:FILL`` blocks,
+each with the machine state before and after it.  ``parse_layer_lines`` is
+the same parser line by line: the reference, and the fallback for chunks the
+fast path does not take (mode changes, a word given twice).  The machine
+state is carried from chunk to chunk, so the parser sees the file as one
+stream.
 """
 
 from __future__ import annotations
 
+import bisect
 import copy
+import math
 import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -26,6 +33,7 @@ __all__ = [
     "iter_chunks",
     "iter_file_chunks",
     "parse_layer",
+    "parse_layer_lines",
     "as_cura_list",
     "MARKER",
 ]
@@ -264,10 +272,22 @@ def iter_file_chunks(stream) -> Iterator[str]:
 def parse_layer(text: str, state: MachineState, retraction: RetractionModel) -> LayerParse:
     """Parse one chunk, advancing `state` (mutated) and learning `retraction`.
 
+    Cura's motion lines are read with one regex pass over the chunk and
+    numpy; the few other lines (comments, commands) line by line.  A chunk
+    that changes the positioning or extrusion mode (M82/M83/G90/G91), or has
+    motion lines this fast path does not take, is parsed line by line
+    (`parse_layer_lines`, the same result).
+
     Returns
     -------
     LayerParse
     """
+    parse = _parse_layer_fast(text, state, retraction)
+    return parse if parse is not None else parse_layer_lines(text, state, retraction)
+
+
+def parse_layer_lines(text: str, state: MachineState, retraction: RetractionModel) -> LayerParse:
+    """`parse_layer`, one line at a time (the reference semantics; used for unusual chunks)."""
     lines = text.split("\n")
     n_lines = len(lines)
     number = None
@@ -438,3 +458,304 @@ def parse_layer(text: str, state: MachineState, retraction: RetractionModel) -> 
     extruding = (moves["de"] > 0) & ((moves["x1"] != moves["x0"]) | (moves["y1"] != moves["y0"]))
     layer_z = float(moves["z1"][np.argmax(extruding)]) if extruding.any() else start_z
     return LayerParse(lines, number, layer_z, moves, meshes, blocks, state.copy(), time_lines)
+
+
+# ----------------------------------------------------------------------------- fast path
+# Digits, "." and "-" (faster than -?\d*\.?\d+); float() refuses the odd ones ("1.2.3", "-", "1-2"),
+# and those it takes are read as the line parser reads them ("5." is 5 for both).
+_NUMBER = r"([-.\d]+)"
+# One match per line: Cura's motion lines ("G1 F.. X.. Y.. Z.. E..", each word optional, in this
+# order, single spaces) with their values; any other line matches the last branch with empty groups.
+_CURA_LINE = re.compile(
+    r"^(?:G([01])(?: F" + _NUMBER + r")?(?: X" + _NUMBER + r")?(?: Y" + _NUMBER + r")?(?: Z" + _NUMBER
+    + r")?(?: E" + _NUMBER + r")?[ \t\r]*(?:;[^\n]*)?$|[^\n]*)",
+    re.M,
+)
+_WORD_COLUMN = {"F": 0, "X": 1, "Y": 2, "Z": 3, "E": 4}
+_NAN = float("nan")
+_COLUMNS = np.arange(5)
+
+
+def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionModel) -> LayerParse | None:
+    """`parse_layer` with the motion lines vectorized; None when the chunk needs `parse_layer_lines`.
+
+    Nothing is changed (`state`, `retraction`) before the chunk is known to fit.
+    """
+    if state.relative_xyz:
+        return None
+    lines = text.split("\n")
+    n_lines = len(lines)
+    start_z = state.z
+    position_known = math.isfinite(state.x) and math.isfinite(state.y)  # else the first moves start nowhere
+    matches = _CURA_LINE.findall(text)
+    if len(matches) != n_lines:
+        return None
+    relative_e = state.relative_e
+    # ---- pass A: the non-motion lines, in order (comments, commands, unusual motion lines)
+    number = None
+    meshes: list[str] = [state.mesh]
+    mesh_index = {state.mesh: 0}
+    type_name, mesh, extruder, fw = state.type, state.mesh, state.extruder, state.fw_retracted
+    kind = TYPE_CODES.get(type_name, 0)
+    cur_mesh = 0
+    learn_until = n_lines  # lines before the first ;TIME_ELAPSED: teach the retraction model
+    firmware_seen = False
+    time_lines: list[int] = []
+    blocks: list[dict] = []
+    current: dict | None = None
+    # attributes of the moves after each processed line: (line, kind, mesh, block, extruder)
+    marks = [(-1, kind, cur_mesh, -1, extruder)]
+    extra_rows: list[tuple] = []  # other G0/G1 lines and G92 E (line, F, X, Y, Z, E, is_g0, is_g92)
+
+    def open_block(i):
+        return {"start": i, "mesh": mesh, "extruder": extruder, "fw_before": fw, "type": type_name,
+                "unsupported": "", "extra_lines": [], "index": len(blocks)}
+
+    def close_block(i):
+        nonlocal current
+        if current is not None:
+            current["stop"] = i
+            current["fw_after"] = fw
+            current["mesh_after"] = mesh
+            current["type_after"] = type_name
+            current["extruder_after"] = extruder
+            blocks.append(current)
+            current = None
+
+    motion_rows = [match for match in matches if match[0]]
+    g0_rows = [k for k, match in enumerate(motion_rows) if match[0] == "0"]  # travels teach the travel speed
+    for i in [i for i, match in enumerate(matches) if not match[0] and lines[i]]:
+        line = lines[i]
+        c = line[0]
+        if c == ";":
+            if line.startswith(";TYPE:"):
+                close_block(i)
+                type_name = line[6:].strip()
+                kind = TYPE_CODES.get(type_name, 0)
+                if kind == FILL and mesh != "NONMESH":
+                    current = open_block(i)
+            elif line.startswith(";MESH:"):
+                close_block(i)
+                mesh = line[6:].strip()
+                if mesh not in mesh_index:
+                    mesh_index[mesh] = len(meshes)
+                    meshes.append(mesh)
+                cur_mesh = mesh_index[mesh]
+                if kind == FILL and mesh != "NONMESH":
+                    current = open_block(i)
+            elif line.startswith(";LAYER:"):
+                close_block(i)
+                try:
+                    number = int(line[7:].strip())
+                except ValueError:
+                    number = None
+            elif line.startswith(";TIME_ELAPSED:"):
+                close_block(i)
+                time_lines.append(i)
+                learn_until = min(learn_until, i)
+            else:
+                continue
+            marks.append((i, kind, cur_mesh, len(blocks) if current is not None else -1, extruder))
+            continue
+        if c == "G" and line[1:2] in ("0", "1") and line[2:3] in (" ", ""):
+            word = line[:2]
+            code = line if ";" not in line else line.split(";", 1)[0]
+        else:
+            code = line.split(";", 1)[0].strip()
+            if not code:
+                continue
+            word = code.split(None, 1)[0].upper()
+        if word in ("G0", "G1", "G00", "G01"):
+            row = [i, _NAN, _NAN, _NAN, _NAN, _NAN, word in ("G0", "G00"), False]
+            for key, val in _PARAM.findall(code):
+                k = _WORD_COLUMN[key] + 1
+                if row[k] == row[k]:
+                    return None  # a word given twice: leave it to the line-by-line parser
+                row[k] = float(val)
+            extra_rows.append(tuple(row))
+        elif word == "G92":
+            for key, val in _PARAM.findall(code):
+                if key == "E":
+                    extra_rows.append((i, _NAN, _NAN, _NAN, _NAN, float(val), False, True))
+                elif key in "XYZ":
+                    if current is not None:
+                        current["unsupported"] = "G92 X/Y/Z inside FILL"
+        elif word == "G10":
+            fw = True
+            if i < learn_until:
+                firmware_seen = True
+        elif word == "G11":
+            fw = False
+        elif word in ("M82", "M83", "G90", "G91"):
+            # a mode change would make the moves after it read differently: not for the fast path
+            if word == "M82" and (relative_e or state.e_mode_relative):
+                return None
+            if word == "M83" and not (relative_e and state.e_mode_relative):
+                return None
+            if word == "G91" or (word == "G90" and relative_e != state.e_mode_relative):
+                return None
+            if current is not None:
+                current["unsupported"] = f"{word} inside FILL"
+        elif word[0] == "T" and word[1:].isdigit():
+            close_block(i)
+            extruder = int(word[1:])
+            marks.append((i, kind, cur_mesh, -1, extruder))
+        elif word in ("G2", "G3", "G02", "G03", "G28", "G29"):
+            if current is not None:
+                current["unsupported"] = f"{word} inside FILL"
+        elif current is not None:
+            current["extra_lines"].append(line)
+    close_block(n_lines)
+
+    # ---- pass B: every move at once
+    n_motion = len(motion_rows)
+    line_of = [i for i, match in enumerate(matches) if match[0]] if n_motion else []
+    try:
+        flat = [float(v) if v else _NAN for match in motion_rows for v in match[1:]]
+    except ValueError:
+        return None
+    is_g92 = None  # rows that are G92 E (they set the E register, they are no moves)
+    if extra_rows:
+        is_g0 = [match[0] == "0" for match in motion_rows]
+        rows = sorted([*zip(line_of, [flat[5 * k : 5 * k + 5] for k in range(n_motion)], is_g0, [False] * n_motion),
+                       *((r[0], list(r[1:6]), r[6], r[7]) for r in extra_rows)], key=lambda r: r[0])
+        line_of = [r[0] for r in rows]
+        flat = [v for r in rows for v in r[1]]
+        g0_rows = [k for k, r in enumerate(rows) if r[2]]
+        is_g92 = np.array([r[3] for r in rows], dtype=bool)
+        if not is_g92.any():
+            is_g92 = None
+    n = len(line_of)
+    # row 0: the state before the chunk; row r + 1: the words of move r (NaN: not given)
+    table = np.array([state.f, state.x, state.y, state.z, state.e, *flat], dtype=np.float64).reshape(n + 1, 5)
+    given = table == table
+    idx = np.where(given, np.arange(n + 1)[:, None], 0)
+    np.maximum.accumulate(idx, axis=0, out=idx)
+    full = table[idx, _COLUMNS]  # F X Y Z E after each row (the E register in absolute mode)
+    has_e = given[1:, 4]
+    if is_g92 is not None:
+        has_e = has_e & ~is_g92
+    if not relative_e:
+        de = np.where(has_e, table[1:, 4] - full[:-1, 4], 0.0)
+    else:
+        de = np.where(has_e, table[1:, 4], 0.0)
+        # the register adds every E word in order (from the last G92 E), like the firmware
+        rows_e = np.flatnonzero(given[1:, 4])
+        if is_g92 is None:
+            e_after = np.cumsum(np.r_[state.e, table[rows_e + 1, 4]])
+        else:
+            value, e_after = state.e, [state.e]
+            for v, reset in zip(table[rows_e + 1, 4].tolist(), is_g92[rows_e].tolist(), strict=True):
+                value = v if reset else value + v
+                e_after.append(value)
+            e_after = np.asarray(e_after, dtype=np.float64)
+        reg = np.zeros(n + 1, dtype=np.int64)
+        reg[rows_e + 1] = np.arange(1, len(rows_e) + 1)
+        np.maximum.accumulate(reg, out=reg)
+        full[:, 4] = e_after[reg]
+    before, after = full[:-1], full[1:]
+    x0, y0, z0 = before[:, 1], before[:, 2], before[:, 3]
+    f1, x1, y1, z1 = after[:, 0], after[:, 1], after[:, 2], after[:, 3]
+    if position_known:
+        moved = (x1 != x0) | (y1 != y0)
+    else:  # NaN (position unknown before the first move) counts as no motion on that axis
+        moved = ((x1 != x0) & ((x0 == x0) | (x1 == x1))) | ((y1 != y0) & ((y0 == y0) | (y1 == y1)))
+    e_move = de != 0.0
+
+    # ---- pass C: retraction depth and what the retraction model learns (few moves)
+    learn_rows = bisect.bisect_left(line_of, learn_until)  # rows before the first ;TIME_ELAPSED:
+    e_only = np.flatnonzero(e_move & ~moved).tolist()  # retractions and primes
+    extruding_rows = np.flatnonzero(moved & (de > 0)).tolist()  # each one resets the depth
+    e_only_de = de[e_only].tolist()
+    retract_update = prime_update = hop_update = travel_update = None
+    retract_rows: list[int] = []
+    for r, d in zip(e_only, e_only_de, strict=True):
+        if d < 0:
+            retract_rows.append(r)
+            if r < learn_rows:
+                retract_update = (-d, f1[r].item())
+        elif r < learn_rows:
+            prime_update = f1[r].item()
+    hop = ~moved & (z1 > z0)
+    if hop.any():
+        for r in np.flatnonzero(hop[:learn_rows] & ~e_move[:learn_rows])[::-1].tolist():
+            k = bisect.bisect_left(retract_rows, r) - 1  # the last retraction before it
+            if line_of[r] - (line_of[retract_rows[k]] if k >= 0 else -10) <= 2:
+                hop_update = (z1[r].item() - z0[r].item(), f1[r].item())
+                break
+    if g0_rows and learn_rows:
+        travels = moved & ~e_move
+        for r in reversed(g0_rows):
+            if r < learn_rows and travels[r]:
+                travel_update = f1[r].item()
+                break
+
+    def depth_before(row: int) -> float:
+        """Retraction depth before move `row` (after all moves before it)."""
+        k = bisect.bisect_left(extruding_rows, row) - 1
+        first = extruding_rows[k] if k >= 0 else -1
+        depth = 0.0 if k >= 0 else state.depth
+        for j in range(bisect.bisect_right(e_only, first), bisect.bisect_left(e_only, row)):
+            d = e_only_de[j]
+            depth = depth - d if d < 0 else max(0.0, depth - d)
+        return depth
+
+    # ---- commit: the chunk fits the fast path
+    if retract_update is not None:
+        retraction.amount, retraction.retract_f = retract_update
+        retraction.seen = True
+    if prime_update is not None:
+        retraction.prime_f = prime_update
+    if hop_update is not None:
+        retraction.hop, retraction.hop_f = hop_update
+    if travel_update is not None:
+        retraction.travel_f = travel_update
+    if firmware_seen:
+        retraction.firmware = True
+        retraction.seen = True
+
+    def state_before(i: int, fw_now: bool, type_now: str, mesh_now: str, extruder_now: int) -> MachineState:
+        r = bisect.bisect_left(line_of, i)  # moves before line i
+        f, x, y, z, e = full[r].tolist()
+        return MachineState(x, y, z, e, f, relative_e, False, state.e_mode_relative,
+                            depth_before(r), fw_now, extruder_now, type_now, mesh_now)
+
+    if is_g92 is not None:
+        real = ~is_g92
+        move_lines = [i for i, g in zip(line_of, is_g92.tolist(), strict=True) if not g]
+    else:
+        real = slice(None)
+        move_lines = line_of
+    fill_blocks = []
+    for b in blocks:
+        has_moves = bisect.bisect_left(move_lines, b["start"]) < bisect.bisect_left(move_lines, b["stop"])
+        fill_blocks.append(FillBlock(
+            b["start"], b["stop"], b["mesh"], b["extruder"],
+            state_before(b["start"], b["fw_before"], b["type"], b["mesh"], b["extruder"]),
+            state_before(b["stop"], b["fw_after"], b["type_after"], b["mesh_after"], b["extruder_after"]),
+            has_moves=has_moves, unsupported=b["unsupported"], extra_lines=b["extra_lines"],
+        ))
+    end = state_before(n_lines, fw, type_name, mesh, extruder)
+    for name in ("x", "y", "z", "e", "f", "depth", "fw_retracted", "extruder", "type", "mesh"):
+        setattr(state, name, getattr(end, name))
+
+    # kind, mesh, block and extruder of each move: those after the last pass-A mark before it
+    attrs = np.array([m[1:] for m in marks], dtype=np.int64)
+    move_lines_arr = np.array(move_lines, dtype=np.int64)
+    row_attrs = attrs[np.searchsorted(np.array([m[0] for m in marks]), move_lines_arr) - 1].T.copy()
+    moves = {
+        "line": move_lines_arr,
+        "x0": x0[real].copy(), "y0": y0[real].copy(), "z0": z0[real].copy(),
+        "x1": x1[real].copy(), "y1": y1[real].copy(), "z1": z1[real].copy(),
+        "de": de[real].copy(), "f": f1[real].copy(),
+        "kind": row_attrs[0], "mesh": row_attrs[1], "block": row_attrs[2], "ext": row_attrs[3],
+    }
+    if not position_known:
+        # A move from an unknown position (nothing before it set X/Y) is no segment: start it where it ends.
+        for a, b in (("x0", "x1"), ("y0", "y1")):
+            unknown = ~np.isfinite(moves[a])
+            if unknown.any():
+                moves[a][unknown] = moves[b][unknown]
+    extruding = (moves["de"] > 0) & ((moves["x1"] != moves["x0"]) | (moves["y1"] != moves["y0"]))
+    layer_z = float(moves["z1"][np.argmax(extruding)]) if extruding.any() else start_z
+    return LayerParse(lines, number, layer_z, moves, meshes, fill_blocks, state.copy(), time_lines)

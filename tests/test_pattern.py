@@ -264,3 +264,35 @@ def test_zone_meter_measures_like_clipping(seed):
     for k, zone in enumerate(zones):
         exact = measured_density(segments, zone, 0.4)
         assert meter.densities(segments, 0.4)[k] == pytest.approx(exact, rel=1e-9, abs=1e-12)
+
+
+def test_balancing_cache_measures_like_a_fresh_meter():
+    """Edge lengths cached between balancing rounds (points appended) equal a fresh measurement."""
+    from DelaunayInfill.pattern import _inside_lengths, _ZoneMeter
+    from DelaunayInfill.triangulation import delaunay_triangles, unique_edges
+
+    rng = np.random.default_rng(4)
+    zones = [star().difference(unary_union([p for p, _ in star_regions()])), *[p for p, _ in star_regions()]]
+    meter = _ZoneMeter(zones)
+    points = rng.uniform(-35, 35, (300, 2))
+    known = {}
+    for extra in (0, 40, 80):
+        pts = np.r_[points, rng.uniform(-10, 10, (extra, 2))] if extra else points
+        points = pts
+        edges = unique_edges(delaunay_triangles(points))
+        cached = _inside_lengths(edges, points[edges], meter, known)
+        fresh = meter.inside_all(points[edges])
+        np.testing.assert_allclose(cached, fresh, rtol=0, atol=1e-12)
+        assert cached.sum() > 0
+
+
+@pytest.mark.parametrize(("region", "target", "width"), [(star(), 0.05, 1.2), (star(), 0.2, 0.4),
+                                                          (box(0, 0, 100, 60), 0.2, 0.4)])
+def test_single_zone_scaling_keeps_a_delaunay_pattern_covering_the_footprint(region, target, width):
+    """Calibration by scaling one sampling: the pattern stays Delaunay and still covers the footprint
+    (the 100 x 60 box at a 5.4 mm radius allows only about 7 % of scaling)."""
+    pattern = InfillPattern.build(region, target, width, seed=3)
+    assert abs(pattern.calibrated_densities[0] - target) <= 0.015
+    assert pattern.quality()["lop_violations"] == 0
+    covered = unary_union([Polygon(pattern.points[t]) for t in pattern.triangles])
+    assert region.difference(covered).area <= 1e-9 * region.area

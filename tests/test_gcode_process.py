@@ -316,3 +316,19 @@ def test_route_cuts_are_the_cheapest_split_of_the_route():
             for c in [(0, *inner, n)]
         )
         assert got == pytest.approx(best)
+
+
+def test_time_elapsed_lines_are_found_without_a_rescan(star, monkeypatch):
+    """The new layer's ;TIME_ELAPSED: lines are placed from the blocks replaced, not searched for."""
+    import DelaunayInfill.gcode.process as process
+
+    def no_rescan(lines):
+        raise AssertionError("the ;TIME_ELAPSED: lines were searched for: their places were computed wrong")
+
+    monkeypatch.setattr(process, "_time_lines", no_rescan)
+    out, report = process_gcode(star, ProcessSettings(seed=3))
+    assert report.layers_processed == 42 and not report.failed_layers
+    elapsed_old = [float(v) for v in re.findall(r";TIME_ELAPSED:([\d.]+)", "".join(star))]
+    elapsed_new = [float(v) for v in re.findall(r";TIME_ELAPSED:([\d.]+)", "".join(out))]
+    assert len(elapsed_new) == len(elapsed_old)
+    assert elapsed_new[-1] == pytest.approx(report.time_after_s, abs=1e-3)

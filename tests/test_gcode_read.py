@@ -163,3 +163,35 @@ def test_parse_of_real_layer_is_consistent(star_text):
     last_e = float(re.findall(r"^G1[^\n;]*E(-?[\d.]+)", star_text, re.M)[-1])
     assert state.e == pytest.approx(last_e)
     assert r.seen and r.amount == pytest.approx(5.0)
+
+
+def test_layer_masks_are_the_moves_own_and_cannot_be_changed(star_text):
+    from DelaunayInfill.gcode.read import FILL, WALL_OUTER, parse_layer_lines
+
+    state, r = MachineState(), RetractionModel()
+    line_state, line_r = MachineState(), RetractionModel()
+    for chunk in list(iter_chunks([star_text]))[:12]:
+        # the fast parser fills some masks in while parsing, the line parser leaves them all to be computed
+        for parse in (parse_layer(chunk, state, r), parse_layer_lines(chunk, line_state, line_r)):
+            m = parse.moves
+            moved = (m["x1"] != m["x0"]) | (m["y1"] != m["y0"])
+            assert np.array_equal(parse.moved(), moved)
+            assert np.array_equal(parse.extruding(), moved & (m["de"] > 0))
+            assert np.array_equal(parse.kind_mask(FILL), m["kind"] == FILL)
+            assert np.array_equal(parse.kind_mask(WALL_OUTER), m["kind"] == WALL_OUTER)
+            assert np.array_equal(parse.xy_length(), np.hypot(m["x1"] - m["x0"], m["y1"] - m["y0"]), equal_nan=True)
+            for name in [*parse.meshes, "no such mesh"]:
+                expected = m["mesh"] == parse.meshes.index(name) if name in parse.meshes else np.zeros(len(m["line"]), bool)
+                assert np.array_equal(parse.mesh_mask(name), expected)
+                assert parse.mesh_mask(name) is parse.mesh_mask(name)  # computed once per layer
+            for mask in (parse.moved(), parse.extruding(), parse.kind_mask(FILL), parse.mesh_mask(parse.meshes[0])):
+                with pytest.raises(ValueError):
+                    mask[:] = False  # shared by every caller: read-only
+
+
+def test_machine_state_copy_is_independent():
+    a = MachineState(x=1.0, y=2.0, e=3.0, type="FILL", mesh="m")
+    b = a.copy()
+    assert b == a and b is not a
+    b.x, b.mesh = 5.0, "other"
+    assert (a.x, a.mesh) == (1.0, "m")

@@ -582,23 +582,25 @@ def mesh_layer(
     cache : AreaCache, optional
     """
     m = parse.moves
-    in_mesh = parse.mesh_mask(mesh)
-    moved = (m["x1"] != m["x0"]) | (m["y1"] != m["y0"])
-    extr = in_mesh & moved & (m["de"] > 0)
-    kind = m["kind"]
-    fill_mask = extr & (kind == FILL)
-    fill = _segments(parse, fill_mask)
+    extr = parse.mesh_mask(mesh) & parse.extruding()
+    fill_mask = extr & parse.kind_mask(FILL)
     fill_block = m["block"][fill_mask]
     fill_de = m["de"][fill_mask]
-    wall_mask = extr & ((kind == WALL_OUTER) | (kind == WALL_INNER))
+    outer_mask = extr & parse.kind_mask(WALL_OUTER)
+    wall_mask = outer_mask | (extr & parse.kind_mask(WALL_INNER))
     has_walls = bool(wall_mask.any())
-    skin_mask = extr & (kind == SKIN)
+    skin_mask = extr & parse.kind_mask(SKIN)
+    # the wall, skin and FILL segments at once; each class is a selection of them
+    used = wall_mask | skin_mask | fill_mask
+    segments = _segments(parse, used)
+    fill = segments[fill_mask[used]]
 
     key = None
     if cache is not None:
+        rounded = np.round(segments, 3)
         h = hashlib.blake2b(digest_size=16)
         for mask in (wall_mask, skin_mask, fill_mask):
-            h.update(np.round(_segments(parse, mask), 3).tobytes())
+            h.update(rounded[mask[used]].tobytes())
             h.update(b"|")
         h.update(np.array([line_width, overlap, fill_reach]).tobytes())
         key = h.digest()
@@ -610,7 +612,7 @@ def mesh_layer(
     part = None
     area = empty_area()
     if has_walls:
-        outer_runs = runs_of(parse, extr & (kind == WALL_OUTER))
+        outer_runs = runs_of(parse, outer_mask)
         rings = _closed_rings(outer_runs, 2.0 * line_width)
         if rings:
             part = _even_odd(rings)

@@ -122,7 +122,7 @@ class _Template:
     """
 
     __slots__ = ("part", "paths", "heads", "tails", "seg_len", "ext_first", "xy", "inner_free", "heads_arr", "tails_arr",
-                 "head_words")
+                 "head_words", "counts", "count_list", "count_starts")
 
     def __init__(self, paths: list[np.ndarray], params: EmitParams, start, end):
         part = self.part = params.part
@@ -137,6 +137,11 @@ class _Template:
         self.seg_len = lengths[is_ext[1:]]  # step i ends at point i + 1
         # extrusion lines of path k are xy[ext_first[k] : ext_first[k + 1]]
         self.ext_first = (first - np.arange(len(paths))).tolist() + [len(self.seg_len)]
+        # the paths with extrusion moves: how many each has and where they start in seg_len
+        per_path = np.diff(self.ext_first)
+        self.counts = per_path[per_path > 0]
+        self.count_list = self.counts.tolist()
+        self.count_starts = np.array(self.ext_first[:-1])[per_path > 0]
         self.heads_arr = pts[first]
         self.tails_arr = pts[first + sizes - 1]
         self.heads = self.heads_arr.tolist()
@@ -320,6 +325,8 @@ class _Writer:
         tails = tpl.tails
         head_words = tpl.head_words
         travel_f = self.p.travel_f
+        travel_feed = "G0 " + _feed_word(travel_f)
+        print_feed = _feed_word(print_f)
         min_travel = self.p.min_travel
         seen = self.r.seen
         times_d, times_f = self._dist, self._feed
@@ -331,7 +338,7 @@ class _Writer:
                 # `travel` without a retraction, inline: most travels of a block are like this
                 if abs(travel_f - self.f) > 1e-9:
                     self.f = travel_f
-                    lines.append("G0 " + _feed_word(travel_f) + head_words[k])
+                    lines.append(travel_feed + head_words[k])
                 else:
                     lines.append("G0 " + head_words[k])
                 times_d.append(d)
@@ -352,7 +359,7 @@ class _Writer:
             # retracted) has moved it, so values computed before the loop would run backwards.
             if abs(print_f - self.f) > 1e-9:
                 self.f = print_f
-                feeds.append(_feed_word(print_f))
+                feeds.append(print_feed)
             else:
                 feeds.append("")
             marks.append(len(lines))
@@ -361,20 +368,19 @@ class _Writer:
                 self.e = self.e + (cum_list[b] - cum_list[a])
             self.x, self.y = tails[k]
         if marks:
-            counts = np.diff(ext_first)
-            counts = counts[counts > 0]
+            counts = tpl.counts
             if relative:
                 e_vals = de
             else:
-                starts = np.array(ext_first[:-1])[np.diff(ext_first) > 0]
-                e_vals = np.repeat(bases, counts) + (cum[1:] - np.repeat(cum[starts], counts))
+                e_vals = np.repeat(bases, counts) + (cum[1:] - np.repeat(cum[tpl.count_starts], counts))
             words = [f"{w} E{e:.5f}" for w, e in zip(tpl.xy, e_vals.tolist(), strict=True)]
+            count_list = tpl.count_list
             out: list[str] = lines[: marks[0]]
             at = 0
             for j, mark in enumerate(marks):
                 if j:
                     out.extend(lines[marks[j - 1] : mark])
-                stop = at + int(counts[j])
+                stop = at + count_list[j]
                 if feeds[j]:
                     out.append("G1 " + feeds[j] + words[at][3:])
                     out.extend(words[at + 1 : stop])

@@ -24,11 +24,13 @@ from ..geometry import contains_xy, polygons_of, to_multipolygon, unary_union
 from ..routing import clip_segments, order_paths
 from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of, split_by_line_ends
 from .emit import EmitParams, emit_block
-from .estimate import move_times, moves_time
+from .estimate import move_times
 from .infer import e_per_mm, infill_density, wall_line_width
 from .read import (
     FILL,
     MARKER,
+    WALL_INNER,
+    WALL_OUTER,
     GCodeError,
     HeaderInfo,
     LayerParse,
@@ -76,7 +78,7 @@ class Survey:
         self.last_chunk = text
         if text.startswith(";LAYER:"):
             self.layer_chunks += 1
-        if self.acceleration is None:
+        if self.acceleration is None and "M204" in text:
             m = _M204.search(text)
             if m:
                 self.acceleration = float(m.group(1))
@@ -177,6 +179,23 @@ class PatternCache:
 
 
 _FINGERPRINTS: dict[int, tuple] = {}
+_SHAPE_KEYS: dict[int, tuple] = {}
+
+
+def _shape_key(area) -> tuple:
+    """(area rounded to 1e-6 mm², perimeter rounded to 1e-6 mm, bounds) of a polygon, a cache key.
+
+    Remembered per object (by id, checked against the object kept alongside): the
+    cached areas come back layer after layer, and shapely's properties cost more than the lookup.
+    """
+    hit = _SHAPE_KEYS.get(id(area))
+    if hit is not None and hit[0] is area:
+        return hit[1]
+    key = (round(area.area, 6), round(area.length, 6), area.bounds)
+    if len(_SHAPE_KEYS) >= 256:
+        _SHAPE_KEYS.clear()
+    _SHAPE_KEYS[id(area)] = (area, key)
+    return key
 
 
 def _fingerprint(area) -> tuple:
@@ -195,6 +214,20 @@ def _fingerprint(area) -> tuple:
         _FINGERPRINTS.clear()
     _FINGERPRINTS[id(area)] = (area, fp)
     return fp
+
+
+def _has_both_walls(parse: LayerParse, mesh: str) -> bool:
+    """Whether `mesh` prints an outer and an inner wall in this layer (else `wall_line_width` is None)."""
+    printed = parse.mesh_mask(mesh) & parse.extruding()
+    return bool((printed & parse.kind_mask(WALL_OUTER)).any()) and bool((printed & parse.kind_mask(WALL_INNER)).any())
+
+
+def _move_seconds(moves: dict, acceleration: float) -> np.ndarray:
+    """Seconds of every move of a layer, shape (n,): `moves_time` one move at a time (the same figures)."""
+    dx, dy, dz = moves["x1"] - moves["x0"], moves["y1"] - moves["y0"], moves["z1"] - moves["z0"]
+    dist = np.sqrt(dx * dx + dy * dy + dz * dz)
+    dist = np.where(dist > 0, dist, np.abs(moves["de"]))
+    return move_times(dist, moves["f"], acceleration)
 
 
 def _split_empty_regions(regions: list) -> tuple[list, object, list]:
@@ -266,6 +299,7 @@ class _Run:
         self.reach_density: dict[str, float] = {}
         self.few_lines_density: dict[tuple, float] = {}
         self.grown: dict[tuple, tuple] = {}
+        self.inside_memo: dict[tuple, tuple] = {}
         self.unions: dict[tuple, tuple] = {}
         self.xy_words: dict[int, tuple] = {}
         self.e_before: dict[int, float] = {}
@@ -286,7 +320,7 @@ class _Run:
         lw = self.mesh_lw.get(mesh)
         if lw is not None:
             return lw
-        w = wall_line_width(parse, mesh)
+        w = wall_line_width(parse, mesh) if _has_both_walls(parse, mesh) else None
         if w is not None:
             # The first layer may use its own (wider) line width: remember only later layers.
             if parse.number is not None and parse.number >= 1:
@@ -297,7 +331,7 @@ class _Run:
             return next(iter(self.mesh_lw.values()))
         if self.any_lw is None:
             for other in parse.meshes:
-                w = wall_line_width(parse, other) if other != mesh else None
+                w = wall_line_width(parse, other) if other != mesh and _has_both_walls(parse, other) else None
                 if w is not None:
                     self.any_lw = w
                     break
@@ -335,16 +369,21 @@ class _Run:
     def process_chunk(self, text: str) -> str:
         parse = parse_layer(text, self.state, self.retraction)
         m = parse.moves
-        moved = (m["x1"] != m["x0"]) | (m["y1"] != m["y0"])
-        extr = moved & (m["de"] > 0)
         # Net E per extruder (retractions and primes included): what Cura's filament figure counts.
         has_e = m["de"] != 0
-        for ext in np.unique(m["ext"][has_e]) if has_e.any() else []:
-            self.e_before[int(ext)] = self.e_before.get(int(ext), 0.0) + float(m["de"][has_e & (m["ext"] == ext)].sum())
-        fill_len = np.hypot(m["x1"] - m["x0"], m["y1"] - m["y0"])[extr & (m["kind"] == FILL)].sum()
+        if has_e.any():
+            exts = m["ext"][has_e]
+            if (exts == exts[0]).all():  # one extruder (the usual case): one sum, the same figure
+                ext = int(exts[0])
+                self.e_before[ext] = self.e_before.get(ext, 0.0) + float(m["de"][has_e].sum())
+            else:
+                for ext in np.unique(exts):
+                    self.e_before[int(ext)] = self.e_before.get(int(ext), 0.0) + float(m["de"][has_e & (m["ext"] == ext)].sum())
+        fill_len = parse.xy_length()[parse.extruding() & parse.kind_mask(FILL)].sum()
         self.report.infill_before_mm += float(fill_len)
         self.report.infill_after_mm += float(fill_len)
         lines = parse.lines
+        time_lines = parse.time_elapsed_lines
         changed = False
         if parse.number is not None:
             self.report.layers_total += 1
@@ -366,14 +405,14 @@ class _Run:
                         self.report.layers_kept += 1
                     else:
                         self.report.layers_processed += 1
-                        lines = new_lines
+                        lines, time_lines = new_lines
                         changed = True
                         self.time_delta += dt
             self.prev_z = parse.z
-        if parse.time_elapsed_lines and self.time_delta != 0.0:
+        if time_lines and self.time_delta != 0.0:
             if not changed:
                 lines = list(lines)
-            for i in parse.time_elapsed_lines if not changed else _time_lines(lines):
+            for i in time_lines:
                 old = float(lines[i][14:].strip() or 0)
                 lines[i] = f";TIME_ELAPSED:{old + self.time_delta:.6f}"
             changed = True
@@ -426,8 +465,9 @@ class _Run:
     def _layer(self, parse: LayerParse):
         s = self.s
         m = parse.moves
-        moved = (m["x1"] != m["x0"]) | (m["y1"] != m["y0"])
-        extr = moved & (m["de"] > 0)
+        moved = parse.moved()
+        extr = parse.extruding()
+        is_fill = parse.kind_mask(FILL)
         blocks = parse.blocks
         fill_meshes: list[str] = []
         for b in blocks:
@@ -448,7 +488,7 @@ class _Run:
             if guess is None:
                 # Cura's own density of this mesh sets how far apart its FILL lines are.
                 fill_now = parse.moves
-                sel = parse.mesh_mask(name) & (fill_now["kind"] == FILL) & (fill_now["de"] > 0)
+                sel = parse.mesh_mask(name) & is_fill & (fill_now["de"] > 0)
                 segs = segments_of(fill_now, sel)
                 guess = infill_density(segs, lw)
                 if guess is not None:
@@ -468,7 +508,7 @@ class _Run:
             for host in hosts:
                 if host == name:
                     continue
-                if fraction_inside(geo[name].fill, self._grown(geo[host].part, lw_of[host]), lw_of[host]) >= 0.9:
+                if self._fraction_inside(geo[name].fill, self._grown(geo[host].part, lw_of[host]), lw_of[host]) >= 0.9:
                     parent_of[name] = host
                     break
         normal = [n for n in fill_meshes if s.enabled(n) and n not in parent_of]
@@ -480,6 +520,7 @@ class _Run:
         stats = {"blocks_replaced": 0, "blocks_kept": 0, "infill_travel_mm": 0.0, "infill_retractions": 0}
         dt = 0.0
         retraction = self._retraction()
+        old_times = None  # seconds of each of Cura's moves (computed at the first replaced block)
         for name in normal:
             g = geo[name]
             lw = lw_of[name]
@@ -568,9 +609,9 @@ class _Run:
                     continue
                 epm = e_per_mm(parse, mask & extr)
                 if epm is None:
-                    epm = e_per_mm(parse, extr & (m["kind"] == FILL) & parse.mesh_mask(blk.mesh))
+                    epm = e_per_mm(parse, extr & is_fill & parse.mesh_mask(blk.mesh))
                 if epm is None:
-                    epm = e_per_mm(parse, extr & (m["kind"] == FILL))
+                    epm = e_per_mm(parse, extr & is_fill)
                 if epm is None:
                     if new_paths:
                         stats["blocks_kept"] += 1
@@ -583,7 +624,7 @@ class _Run:
                 elif had_fill:
                     print_f = float(m["f"][mask & extr][0])
                 else:
-                    fills = m["f"][extr & (m["kind"] == FILL)]
+                    fills = m["f"][extr & is_fill]
                     print_f = float(fills[0]) if fills.size else blk.before.f
                 g0 = m["f"][mask & ~extr & moved]
                 travel_f = s.travel_speed * 60.0 if s.travel_speed else (retraction.travel_f or (float(g0.max()) if g0.size else 9000.0))
@@ -600,16 +641,15 @@ class _Run:
                 )
                 out = emit_block(new_paths, blk.before, blk.after, params, blk.extra_lines)
                 replaced[bi] = out.lines
-                old_t = moves_time(
-                    m["x1"][mask] - m["x0"][mask], m["y1"][mask] - m["y0"][mask], m["z1"][mask] - m["z0"][mask],
-                    m["de"][mask], m["f"][mask], self.acceleration,
-                )
+                if old_times is None:
+                    old_times = _move_seconds(m, self.acceleration)
+                old_t = float(old_times[mask].sum())
                 new_t = float(move_times(np.concatenate(out.dist), np.concatenate(out.feed), self.acceleration).sum()) if out.dist else 0.0
                 dt += new_t - old_t
                 # Net change of the filament used: every E move of the new block minus those of Cura's.
                 old_net = float(m["de"][mask].sum())  # not after.e - before.e: Cura may G92 E0 inside
                 self.e_delta[blk.extruder] = self.e_delta.get(blk.extruder, 0.0) + out.net_e - old_net
-                old_len = float(np.hypot(m["x1"] - m["x0"], m["y1"] - m["y0"])[mask & extr & (m["kind"] == FILL)].sum())
+                old_len = float(parse.xy_length()[mask & extr & is_fill].sum())
                 self.report.infill_after_mm += out.extrude_mm - old_len
                 stats["blocks_replaced"] += 1
                 stats["infill_travel_mm"] += out.travel_mm
@@ -621,13 +661,19 @@ class _Run:
         lines = parse.lines
         out_lines: list[str] = []
         pos = 0
+        shifts = []  # (stop, lines added) of each replaced block
         for bi in sorted(replaced, key=lambda i: blocks[i].start):
             blk = blocks[bi]
             out_lines.extend(lines[pos : blk.start + 1])
             out_lines.extend(replaced[bi])
             pos = blk.stop
+            shifts.append((blk.stop, len(replaced[bi]) - (blk.stop - blk.start - 1)))
         out_lines.extend(lines[pos:])
-        return out_lines, dt, stats
+        # ;TIME_ELAPSED: lines end blocks (never inside one): each moves by what the blocks before it add
+        time_lines = [t + sum(added for stop, added in shifts if t >= stop) for t in parse.time_elapsed_lines]
+        if not all(out_lines[t].startswith(";TIME_ELAPSED:") for t in time_lines):
+            time_lines = _time_lines(out_lines)
+        return (out_lines, time_lines), dt, stats
 
     def _share_paths(self, paths, fill_blocks: list[int], blocks, part, penalty: float, assigned: dict) -> None:
         """Cut the layer's route into one run of consecutive paths per Cura FILL block (`_plan_runs`).
@@ -645,6 +691,18 @@ class _Run:
             self.shares[key] = hit
         for bi, run in zip(fill_blocks, hit[2], strict=True):
             assigned[bi] = list(run)
+
+    def _fraction_inside(self, fill: np.ndarray, area, step: float) -> float:
+        """`fraction_inside`, remembered for the last few (lines, area) pairs (prisms repeat them)."""
+        key = (id(area), fill.shape, round(step, 6))
+        hit = self.inside_memo.get(key)
+        if hit is not None and hit[0] is area and np.array_equal(hit[1], fill):
+            return hit[2]
+        value = fraction_inside(fill, area, step)
+        if len(self.inside_memo) >= 32:
+            self.inside_memo.pop(next(iter(self.inside_memo)))
+        self.inside_memo[key] = (area, fill, value)
+        return value
 
     def _grown(self, area, by: float):
         """`area` buffered by `by` mm, remembered (the same part object comes back layer after layer)."""
@@ -673,7 +731,7 @@ class _Run:
         inset = lw / 2 - overlap
         if inset <= 1e-6:
             return area
-        key = (round(area.area, 6), round(area.length, 6), area.bounds, round(inset, 6))
+        key = (*_shape_key(area), round(inset, 6))
         hit = self.line_areas.get(key)
         if hit is None or hit[0] is not area:
             inner = to_multipolygon(area.buffer(-inset, 4))
@@ -722,7 +780,7 @@ class _Run:
 
     def _clip(self, pattern, area, start):
         """`pattern.clip`, remembered: a prism's layers clip the same area from the same nozzle position."""
-        key = (id(pattern), round(area.area, 6), round(area.length, 6), area.bounds,
+        key = (id(pattern), *_shape_key(area),
                None if start is None else (round(start[0], 2), round(start[1], 2)))
         hit = self.clips.get(key)
         if hit is None or hit[0] is not pattern:  # ids are reused once a pattern is freed
@@ -751,7 +809,7 @@ class _Run:
         lines end (like Cura's, half a line width less the overlap before it).
         A zone the band would (nearly) swallow is measured whole.
         """
-        key = (round(area.area, 6), round(area.length, 6), area.bounds, tuple(id(r) for r in regions), round(lw, 4))
+        key = (*_shape_key(area), tuple(id(r) for r in regions), round(lw, 4))
         hit = self.zone_areas.get(key)
         if hit is not None and all(a is b for a, b in zip(hit[0], regions, strict=True)):
             return hit[1]

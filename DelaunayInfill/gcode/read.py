@@ -14,11 +14,11 @@ stream.
 from __future__ import annotations
 
 import bisect
-import copy
 import math
 import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
+from itertools import compress
 
 import numpy as np
 
@@ -95,7 +95,10 @@ class MachineState:
     mesh: str = "NONMESH"
 
     def copy(self) -> MachineState:
-        return copy.copy(self)
+        # what copy.copy does for a plain dataclass, without its generic protocol (called per block)
+        new = MachineState.__new__(MachineState)
+        new.__dict__.update(self.__dict__)
+        return new
 
 
 @dataclass
@@ -153,11 +156,52 @@ class LayerParse:
     blocks: list[FillBlock]
     end_state: MachineState
     time_elapsed_lines: list[int]
+    # masks derived from `moves`, computed once per layer (read-only arrays; the moves are not changed)
+    _derived: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def _remember(self, key, value: np.ndarray) -> np.ndarray:
+        value.setflags(write=False)
+        self._derived[key] = value
+        return value
 
     def mesh_mask(self, name: str) -> np.ndarray:
+        """Moves of mesh `name`, shape (n,) bool (read-only)."""
+        hit = self._derived.get(("mesh", name))
+        if hit is not None:
+            return hit
         if name not in self.meshes:
-            return np.zeros(len(self.moves["line"]), dtype=bool)
-        return self.moves["mesh"] == self.meshes.index(name)
+            return self._remember(("mesh", name), np.zeros(len(self.moves["line"]), dtype=bool))
+        return self._remember(("mesh", name), self.moves["mesh"] == self.meshes.index(name))
+
+    def moved(self) -> np.ndarray:
+        """Moves that change X or Y, shape (n,) bool (read-only)."""
+        hit = self._derived.get("moved")
+        if hit is None:
+            m = self.moves
+            hit = self._remember("moved", (m["x1"] != m["x0"]) | (m["y1"] != m["y0"]))
+        return hit
+
+    def extruding(self) -> np.ndarray:
+        """Moves that change X or Y and extrude (dE > 0), shape (n,) bool (read-only)."""
+        hit = self._derived.get("extruding")
+        if hit is None:
+            hit = self._remember("extruding", self.moved() & (self.moves["de"] > 0))
+        return hit
+
+    def kind_mask(self, kind: int) -> np.ndarray:
+        """Moves of feature `kind` (TYPE_CODES), shape (n,) bool (read-only)."""
+        hit = self._derived.get(("kind", kind))
+        if hit is None:
+            hit = self._remember(("kind", kind), self.moves["kind"] == kind)
+        return hit
+
+    def xy_length(self) -> np.ndarray:
+        """XY length of every move, shape (n,) mm (read-only)."""
+        hit = self._derived.get("xy_length")
+        if hit is None:
+            m = self.moves
+            hit = self._remember("xy_length", np.hypot(m["x1"] - m["x0"], m["y1"] - m["y0"]))
+        return hit
 
 
 @dataclass
@@ -220,6 +264,9 @@ def iter_chunks(layers: Iterable[str]) -> Iterator[str]:
     Strings that already start at a layer pass through unchanged (no copy).
     """
     for text in layers:
+        if "\n;LAYER:" not in text:  # no layer line but maybe the first: the string is one chunk
+            yield text
+            continue
         starts = [m.start() for m in _LAYER_LINE.finditer(text)]
         if not starts or starts == [0]:
             yield text
@@ -522,9 +569,11 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
             blocks.append(current)
             current = None
 
-    motion_rows = [match for match in matches if match[0]]
-    g0_rows = [k for k, match in enumerate(motion_rows) if match[0] == "0"]  # travels teach the travel speed
-    for i in [i for i, match in enumerate(matches) if not match[0] and lines[i]]:
+    codes = [match[0] for match in matches]  # "0", "1" (Cura's motion lines) or "" (any other line)
+    motion_rows = list(compress(matches, codes))
+    motion_codes = list(compress(codes, codes))
+    g0_rows = [k for k, code in enumerate(motion_codes) if code == "0"]  # travels teach the travel speed
+    for i in [i for i, code in enumerate(codes) if not code and lines[i]]:
         line = lines[i]
         c = line[0]
         if c == ";":
@@ -609,14 +658,14 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
 
     # ---- pass B: every move at once
     n_motion = len(motion_rows)
-    line_of = [i for i, match in enumerate(matches) if match[0]] if n_motion else []
+    line_of = list(compress(range(n_lines), codes)) if n_motion else []
     try:
         flat = [float(v) if v else _NAN for match in motion_rows for v in match[1:]]
     except ValueError:
         return None
     is_g92 = None  # rows that are G92 E (they set the E register, they are no moves)
     if extra_rows:
-        is_g0 = [match[0] == "0" for match in motion_rows]
+        is_g0 = [code == "0" for code in motion_codes]
         rows = sorted([*zip(line_of, [flat[5 * k : 5 * k + 5] for k in range(n_motion)], is_g0, [False] * n_motion),
                        *((r[0], list(r[1:6]), r[6], r[7]) for r in extra_rows)], key=lambda r: r[0])
         line_of = [r[0] for r in rows]
@@ -756,6 +805,11 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
             unknown = ~np.isfinite(moves[a])
             if unknown.any():
                 moves[a][unknown] = moves[b][unknown]
-    extruding = (moves["de"] > 0) & ((moves["x1"] != moves["x0"]) | (moves["y1"] != moves["y0"]))
-    layer_z = float(moves["z1"][np.argmax(extruding)]) if extruding.any() else start_z
-    return LayerParse(lines, number, layer_z, moves, meshes, fill_blocks, state.copy(), time_lines)
+    moved = (moves["x1"] != moves["x0"]) | (moves["y1"] != moves["y0"])
+    extruding = (moves["de"] > 0) & moved
+    first = np.flatnonzero(extruding)[:1]
+    layer_z = float(moves["z1"][first[0]]) if len(first) else start_z
+    parse = LayerParse(lines, number, layer_z, moves, meshes, fill_blocks, state.copy(), time_lines)
+    parse._remember("moved", moved)
+    parse._remember("extruding", extruding)
+    return parse

@@ -332,3 +332,17 @@ def test_time_elapsed_lines_are_found_without_a_rescan(star, monkeypatch):
     elapsed_new = [float(v) for v in re.findall(r";TIME_ELAPSED:([\d.]+)", "".join(out))]
     assert len(elapsed_new) == len(elapsed_old)
     assert elapsed_new[-1] == pytest.approx(report.time_after_s, abs=1e-3)
+
+
+def test_clip_stubs_shorter_than_half_a_line_are_not_printed():
+    """A clip can leave a 0.08 mm stub in a sharp corner: printing it costs a travel (and a retraction)."""
+    from types import SimpleNamespace
+
+    from DelaunayInfill.gcode.process import _Run
+
+    long_path = np.array([[0.0, 0.0], [5.0, 0.0], [5.0, 3.0]])
+    stub = np.array([[10.0, 10.0], [10.05, 10.06]])
+    result = SimpleNamespace(paths=[long_path, stub, np.array([[1.0, 1.0]])])
+    kept = _Run._paths(SimpleNamespace(result_memo={}), result, min_length=0.2)
+    assert len(kept) == 1 and np.array_equal(kept[0], long_path)
+    assert len(_Run._paths(SimpleNamespace(result_memo={}), result)) == 2  # no minimum: both pieces

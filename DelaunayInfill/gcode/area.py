@@ -268,6 +268,39 @@ def split_by_lines(area, fills: list[np.ndarray], spacings: list[float], step: f
             else empty_area() for k in range(len(fills))]
 
 
+def direction_peaks(fill: np.ndarray, min_share: float = 0.12):
+    """Main directions of segments, on a 2-degree histogram weighted by length.
+
+    Parameters
+    ----------
+    fill : ndarray, shape (k, 2, 2)
+        Segments, mm.
+    min_share : float
+        A peak holds at least this share of the total length.
+
+    Returns
+    -------
+    length : ndarray, shape (k,)
+        Segment lengths, mm.
+    angle : ndarray, shape (k,)
+        Directions in degrees, [0, 180).
+    peaks : ndarray of int
+        Histogram bins (bin b is 2 b degrees) that are local maxima.
+    total : float
+        Total length, mm.
+    """
+    d = fill[:, 1] - fill[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    angle = np.mod(np.degrees(np.arctan2(d[:, 1], d[:, 0])), 180.0)
+    bins = np.round(angle / 2.0).astype(int) % 90
+    weight = np.bincount(bins, weights=length, minlength=90)
+    total = float(weight.sum())
+    # A direction can straddle two 2-degree bins: smooth, then take local maxima as families.
+    smooth = weight + np.roll(weight, 1) + np.roll(weight, -1)
+    peak = (smooth > min_share * total) & (smooth >= np.roll(smooth, 1)) & (smooth > np.roll(smooth, -1))
+    return length, angle, np.flatnonzero(peak), total
+
+
 def line_families(fill: np.ndarray, min_share: float = 0.12, max_families: int = 4) -> list[tuple[float, np.ndarray]]:
     """Families of parallel lines among FILL segments (lines, grid, triangles patterns).
 
@@ -287,20 +320,12 @@ def line_families(fill: np.ndarray, min_share: float = 0.12, max_families: int =
     """
     if len(fill) < 4:
         return []
-    d = fill[:, 1] - fill[:, 0]
-    length = np.hypot(d[:, 0], d[:, 1])
-    ang = np.mod(np.degrees(np.arctan2(d[:, 1], d[:, 0])), 180.0)
-    bins = np.round(ang / 2.0).astype(int) % 90
-    weight = np.bincount(bins, weights=length, minlength=90)
-    total = weight.sum()
+    length, ang, peaks, total = direction_peaks(fill, min_share)
     if total <= 0:
         return []
-    # A direction can straddle two 2-degree bins: smooth, then take local maxima as families.
-    smooth = weight + np.roll(weight, 1) + np.roll(weight, -1)
-    peak = (smooth > min_share * total) & (smooth >= np.roll(smooth, 1)) & (smooth > np.roll(smooth, -1))
     out = []
     covered = np.zeros(len(fill), dtype=bool)
-    for fam in np.flatnonzero(peak):
+    for fam in peaks:
         delta = np.abs(np.mod(ang - 2.0 * fam + 90.0, 180.0) - 90.0)
         member = (delta <= 3.5) & ~covered
         if not member.any():

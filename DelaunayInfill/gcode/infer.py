@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .area import runs_of, sample_segments
+from .area import direction_peaks, runs_of, sample_segments
 from .read import WALL_INNER, WALL_OUTER, LayerParse
 
 __all__ = ["wall_line_width", "infill_density", "e_per_mm"]
@@ -71,16 +71,7 @@ def infill_density(fill: np.ndarray, line_width: float, area: float | None = Non
     """
     if len(fill) < 4:
         return None
-    d = fill[:, 1] - fill[:, 0]
-    length = np.hypot(d[:, 0], d[:, 1])
-    ang = np.mod(np.degrees(np.arctan2(d[:, 1], d[:, 0])), 180.0)
-    bins = np.round(ang / 2.0).astype(int) % 90
-    weight = np.bincount(bins, weights=length, minlength=90)
-    total = weight.sum()
-    # A direction can straddle two 2-degree bins: smooth, then take local maxima as families.
-    smooth = weight + np.roll(weight, 1) + np.roll(weight, -1)
-    peak = (smooth > 0.12 * total) & (smooth >= np.roll(smooth, 1)) & (smooth > np.roll(smooth, -1))
-    families = np.flatnonzero(peak)
+    length, ang, families, total = direction_peaks(fill, 0.12)
     density = 0.0
     members = []
     for fam in families:

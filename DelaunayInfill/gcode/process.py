@@ -567,7 +567,7 @@ class _Run:
                 first = blocks[fill_blocks[0]].before
                 start = (first.x, first.y) if math.isfinite(first.x) else None
                 result = self._clip(pattern, self._line_area(area, lw, overlap_of[name]), start)
-                paths = self._paths(result)
+                paths = self._paths(result, min_length=lw / 2)
                 self._measure(result, paths, area, density, used_regions, lw)
             for part, zname in empty_parts:
                 self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
@@ -790,11 +790,19 @@ class _Run:
             self.clips[key] = hit
         return hit[1]
 
-    def _paths(self, result) -> list[np.ndarray]:
-        """The result's paths as float arrays, the same objects for a remembered clip result."""
+    def _paths(self, result, min_length: float = 0.0) -> list[np.ndarray]:
+        """The result's paths as float arrays, the same objects for a remembered clip result.
+
+        Pieces shorter than `min_length` (mm) are left out: a clip can leave a
+        stub of a few hundredths of a millimetre in a sharp corner, which prints
+        nothing useful yet costs a travel (and often a retraction) to reach.
+        """
         hit = self.result_memo.get(id(result))
         if hit is None or hit[0] is not result:
-            hit = (result, [np.asarray(p, dtype=float) for p in result.paths if len(p) >= 2], {})
+            arrays = [np.asarray(p, dtype=float) for p in result.paths if len(p) >= 2]
+            lengths = [float(np.hypot(*np.diff(a, axis=0).T).sum()) for a in arrays]
+            kept = [a for a, n in zip(arrays, lengths, strict=True) if n >= min_length]
+            hit = (result, kept, {})
             if len(self.result_memo) >= 16:
                 self.result_memo.pop(next(iter(self.result_memo)))
             self.result_memo[id(result)] = hit

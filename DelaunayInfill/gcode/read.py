@@ -316,6 +316,15 @@ def iter_file_chunks(stream) -> Iterator[str]:
         yield "".join(buf)
 
 
+def _command(line: str) -> tuple[str, str]:
+    """A line's command word (upper case) and its code without the comment; ("", "") for none."""
+    if line[:1] == "G" and line[1:2] in ("0", "1") and line[2:3] in (" ", ""):
+        # Cura's motion lines, the bulk of a layer: no splitting needed
+        return line[:2], line if ";" not in line else line.split(";", 1)[0]
+    code = line.split(";", 1)[0].strip()
+    return (code.split(None, 1)[0].upper(), code) if code else ("", "")
+
+
 def parse_layer(text: str, state: MachineState, retraction: RetractionModel) -> LayerParse:
     """Parse one chunk, advancing `state` (mutated) and learning `retraction`.
 
@@ -393,15 +402,9 @@ def parse_layer_lines(text: str, state: MachineState, retraction: RetractionMode
                 # What follows a layer's end is end G-code or next-group code, not Cura's own retraction.
                 learn = False
             continue
-        if c == "G" and line[1:2] in ("0", "1") and line[2:3] in (" ", ""):
-            # Cura's motion lines, the bulk of a layer: no splitting needed
-            word = line[:2]
-            code = line if ";" not in line else line.split(";", 1)[0]
-        else:
-            code = line.split(";", 1)[0].strip()
-            if not code:
-                continue
-            word = code.split(None, 1)[0].upper()
+        word, code = _command(line)
+        if not code:
+            continue
         if word in ("G0", "G1", "G00", "G01"):
             x0, y0, z0 = state.x, state.y, state.z
             de = 0.0
@@ -606,14 +609,9 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
                 continue
             marks.append((i, kind, cur_mesh, len(blocks) if current is not None else -1, extruder))
             continue
-        if c == "G" and line[1:2] in ("0", "1") and line[2:3] in (" ", ""):
-            word = line[:2]
-            code = line if ";" not in line else line.split(";", 1)[0]
-        else:
-            code = line.split(";", 1)[0].strip()
-            if not code:
-                continue
-            word = code.split(None, 1)[0].upper()
+        word, code = _command(line)
+        if not code:
+            continue
         if word in ("G0", "G1", "G00", "G01"):
             row = [i, _NAN, _NAN, _NAN, _NAN, _NAN, word in ("G0", "G00"), False]
             for key, val in _PARAM.findall(code):

@@ -207,10 +207,12 @@ def test_infill_mesh_blocks_never_keep_cura_s_infill_on_top_of_the_new(bracket, 
     cura_blocks = {(round(z, 3), seg.tobytes()) for z, mesh, seg in _fill_segments("".join(bracket)) if mesh.endswith(BOX)}
     new_blocks = [(round(z, 3), seg.tobytes()) for z, mesh, seg in _fill_segments("".join(out)) if mesh.endswith(BOX)]
     assert not cura_blocks.intersection(new_blocks), "a modifier block still prints Cura's lines"
-    # measured on the text inside the box (away from its border); the window is not all infill area
-    # (the H's holes, skin): Cura's own 60 % lines there give the share that is
+    # measured on the text inside the box (2 mm in from its border); the window is not all infill area
+    # (the H's holes, skin): Cura's own 60 % lines there give the share that is. The window spans the
+    # whole box: at 10 % the pattern's spacing is ~10 mm, so a smaller window measures sampling noise
+    # (a 20 x 10 mm one read 5-14 % over seeds 0-7; this one 9.2-10.2 % on current and oldest pins).
     region = next(r for r in report.regions if r.name.endswith(BOX))
-    window = box(115.0, 105.0, 135.0, 115.0)
+    window = box(112.0, 93.0, 137.0, 127.0)
     zs = sorted({z for z, mesh, _ in _fill_segments("".join(bracket)) if mesh.endswith(BOX)})
     share = _density_in("".join(bracket), window, z_range=(zs[1], zs[-2])) / 0.6
     measured = _density_in("".join(out), window, z_range=(zs[1], zs[-2])) / share

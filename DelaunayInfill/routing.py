@@ -287,28 +287,29 @@ def order_paths(
         x[i] = x[i + n] = np.inf
         order[k], flipped[k] = i, j >= n
         here = ends[i] if j >= n else ends[i + n]
-    entry = np.where(flipped[:, None], ends[order + n], ends[order])
-    exit_ = np.where(flipped[:, None], ends[order], ends[order + n])
-    origin = np.asarray(start, dtype=float) if start is not None else entry[0]
+    # Path ends as complex numbers: gathers on 1-D arrays and abs() (numpy's hypot) keep a round cheap.
+    ends_c = ends[:, 0] + 1j * ends[:, 1]
+    entry = np.where(flipped, ends_c[order + n], ends_c[order])
+    exit_ = np.where(flipped, ends_c[order], ends_c[order + n])
+    origin = complex(*np.asarray(start, dtype=float)) if start is not None else entry[0]
     offsets = np.arange(1, window + 1)
+    # Candidate moves (the same every round): reverse positions i..j, j = i + offset.
+    i = np.arange(n)[:, None]
+    j = np.minimum(i + offsets[None, :], n - 1)
+    valid = (i + offsets[None, :] <= n - 1) & ((i > 0) | (start is not None))
+    nxt = np.minimum(j + 1, n - 1)
+    last = j == n - 1  # reversing up to the end: no travel after it
+    prev = np.maximum(i - 1, 0)
+    rows = np.arange(n)
     for _ in range(rounds):
         # Reversing positions i..j turns the travels (exit[i-1] -> entry[i]) and
         # (exit[j] -> entry[j+1]) into (exit[i-1] -> exit[j]) and (entry[i] -> entry[j+1]).
-        i = np.arange(n)[:, None]
-        j = np.minimum(i + offsets[None, :], n - 1)
-        valid = (i + offsets[None, :] <= n - 1) & ((i > 0) | (start is not None))
-        before = np.where((i > 0)[..., None], exit_[np.maximum(i - 1, 0)], origin)
-        nxt = np.minimum(j + 1, n - 1)
-        last = j == n - 1  # reversing up to the end: no travel after it
-        old = np.hypot(*np.moveaxis(entry[i] - before, -1, 0)) + np.where(
-            last, 0.0, np.hypot(*np.moveaxis(entry[nxt] - exit_[j], -1, 0))
-        )
-        new = np.hypot(*np.moveaxis(exit_[j] - before, -1, 0)) + np.where(
-            last, 0.0, np.hypot(*np.moveaxis(entry[nxt] - entry[i], -1, 0))
-        )
+        before = np.where(i > 0, exit_[prev], origin)
+        old = np.abs(entry[i] - before) + np.where(last, 0.0, np.abs(entry[nxt] - exit_[j]))
+        new = np.abs(exit_[j] - before) + np.where(last, 0.0, np.abs(entry[nxt] - entry[i]))
         gain = np.where(valid, old - new, -np.inf)
         best = gain.argmax(axis=1)
-        best_gain = gain[np.arange(n), best]
+        best_gain = gain[rows, best]
         movers = np.flatnonzero(best_gain > 1e-9)
         if movers.size == 0:
             break
@@ -325,12 +326,12 @@ def order_paths(
             entry[run], exit_[run] = exit_[run][::-1].copy(), entry[run][::-1].copy()
             order[run] = order[run][::-1].copy()
             flipped[run] = ~flipped[run][::-1]
-        if saved < 2e-3 * float(np.hypot(*(entry[1:] - exit_[:-1]).T).sum()):
+        if saved < 2e-3 * float(np.abs(entry[1:] - exit_[:-1]).sum()):
             break
     out = [paths[i][::-1] if f else paths[i] for i, f in zip(order, flipped)]
-    travel = float(np.hypot(*(entry[1:] - exit_[:-1]).T).sum())
+    travel = float(np.abs(entry[1:] - exit_[:-1]).sum())
     if start is not None:
-        travel += float(np.hypot(*(entry[0] - origin)))
+        travel += float(abs(entry[0] - origin))
     return out, travel
 
 

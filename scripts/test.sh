@@ -52,7 +52,10 @@ make_venv() {  # make_venv NAME PIP-ARGS...
 run_pytest() {  # run_pytest LABEL VENV ARGS...
   local label="$1" venv="$2"; shift 2
   log "pytest [$label] $*"
-  "$VENVS/$venv/bin/python" -m pytest -q -p no:cacheprovider --junitxml="$RESULTS/$label.xml" "$@"
+  # the venv's bin first: tests run the `delaunay-infill` console script of this checkout, not one
+  # that happens to be installed elsewhere on the machine
+  PATH="$VENVS/$venv/bin:$PATH" "$VENVS/$venv/bin/python" -m pytest -q -p no:cacheprovider \
+    --junitxml="$RESULTS/$label.xml" "$@"
   local rc=$?
   if [ $rc -ne 0 ]; then FAILED_STEPS+=("$label (exit $rc)"); fi
 }

@@ -65,6 +65,8 @@ CURRENT=(numpy scipy shapely)
 OLDEST_S18=(numpy==1.23.5 scipy==1.9.3 shapely==1.8.5)
 OLDEST_S20=(numpy==1.23.5 scipy==1.9.3 shapely==2.0.1)
 
+# Debian's python3 makes virtual environments only with python3-venv (ensurepip) installed
+"$PY" -c "import ensurepip, venv" 2>/dev/null || need_apt python3-venv || FAILED_STEPS+=("apt-get install python3-venv")
 make_venv current "${CURRENT[@]}" "${TEST_DEPS[@]}" || FAILED_STEPS+=("venv current")
 UNIT=(tests -m "not engine and not gui" --ignore=tests/engine --ignore=tests/gui)
 run_pytest unit-current current "${UNIT[@]}"

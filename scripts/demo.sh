@@ -8,6 +8,11 @@ set -eu
 cd "$(dirname "$0")/.."
 VENV=".venvs/demo"
 if [ ! -x "$VENV/bin/delaunay-infill" ]; then
+  if ! python3 -c "import ensurepip, venv" 2>/dev/null; then
+    # Debian's python3 makes virtual environments only with python3-venv installed
+    sudo=""; [ "$(id -u)" = 0 ] || sudo="sudo"
+    $sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends python3-venv >/dev/null
+  fi
   python3 -m venv "$VENV"
   "$VENV/bin/python" -m pip install -q --upgrade pip
   "$VENV/bin/python" -m pip install -q -e '.[plot]'

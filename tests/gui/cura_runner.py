@@ -73,15 +73,28 @@ class CuraRun:
 
         The test driver's own entries are excluded: its failures show in the status.
         """
+        # A traceback is logged line by line from one place (level, logger, thread); another thread's
+        # entry may land between its lines, so lines join the latest block of their own source when
+        # it was last written within a second.
         blocks: list[list[str]] = []
-        source = None
+        latest: dict[tuple, tuple[int, float]] = {}  # source -> (block index, time of its last entry)
+        current = None
         for line in self.cura_log.splitlines():
-            entry = re.match(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ - (\w+) - (.*? \[\d+\]):", line)
-            if entry and (entry.groups() != source or not blocks):
-                blocks.append([line])  # a traceback is logged line by line from one place: keep it together
-                source = entry.groups()
-            elif blocks:
-                blocks[-1].append(line)
+            entry = re.match(r"^\d{4}-\d\d-\d\d (\d\d):(\d\d):(\d\d),(\d+) - (\w+) - (.*? \[\d+\]):", line)
+            if entry:
+                h, m, sec, ms = (int(v) for v in entry.groups()[:4])
+                stamp = 3600 * h + 60 * m + sec + ms / 1000
+                source = entry.groups()[4:]
+                hit = latest.get(source)
+                if hit is not None and 0 <= stamp - hit[1] <= 1.0:
+                    current = hit[0]
+                    blocks[current].append(line)
+                else:
+                    blocks.append([line])
+                    current = len(blocks) - 1
+                latest[source] = (current, stamp)
+            elif current is not None:
+                blocks[current].append(line)
         found = []
         for block in blocks:
             text = "\n".join(block)

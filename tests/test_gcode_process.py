@@ -346,3 +346,15 @@ def test_clip_stubs_shorter_than_half_a_line_are_not_printed():
     kept = _Run._paths(SimpleNamespace(result_memo={}), result, min_length=0.2)
     assert len(kept) == 1 and np.array_equal(kept[0], long_path)
     assert len(_Run._paths(SimpleNamespace(result_memo={}), result)) == 2  # no minimum: both pieces
+
+
+def test_remembered_paths_follow_the_minimum_length():
+    """The per-result memo must not hand back pieces filtered with another minimum."""
+    from types import SimpleNamespace
+
+    from DelaunayInfill.gcode.process import _Run
+
+    run = SimpleNamespace(result_memo={})
+    result = SimpleNamespace(paths=[np.array([[0.0, 0.0], [5.0, 0.0]]), np.array([[9.0, 9.0], [9.1, 9.0]])])
+    assert len(_Run._paths(run, result)) == 2
+    assert len(_Run._paths(run, result, min_length=0.2)) == 1

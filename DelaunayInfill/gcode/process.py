@@ -798,11 +798,11 @@ class _Run:
         nothing useful yet costs a travel (and often a retraction) to reach.
         """
         hit = self.result_memo.get(id(result))
-        if hit is None or hit[0] is not result:
+        if hit is None or hit[0] is not result or hit[3] != min_length:
             arrays = [np.asarray(p, dtype=float) for p in result.paths if len(p) >= 2]
             lengths = [float(np.hypot(*np.diff(a, axis=0).T).sum()) for a in arrays]
             kept = [a for a, n in zip(arrays, lengths, strict=True) if n >= min_length]
-            hit = (result, kept, {})
+            hit = (result, kept, {}, min_length)
             if len(self.result_memo) >= 16:
                 self.result_memo.pop(next(iter(self.result_memo)))
             self.result_memo[id(result)] = hit

@@ -76,7 +76,7 @@ make_venv oldest-shapely20 "${OLDEST_S20[@]}" "${TEST_DEPS[@]}" "matplotlib<3.9"
 run_pytest unit-oldest-shapely20 oldest-shapely20 "${UNIT[@]}"
 
 if [ "$WHAT" = all ]; then
-  need_apt cura-engine cura xvfb xauth imagemagick python3-zeroconf python3-pip || FAILED_STEPS+=("apt-get install")
+  need_apt cura-engine cura xvfb xauth imagemagick python3-zeroconf python3-pip iproute2 || FAILED_STEPS+=("apt-get install")
   run_pytest engine current tests/engine
   run_pytest gui current tests/gui
 fi

@@ -106,7 +106,16 @@ class CuraRun:
     def failure(self) -> str:
         """A readable summary for assertion messages."""
         tail = "\n".join(self.cura_log.splitlines()[-40:])
-        return f"status: {json.dumps(self.status, indent=1, default=str)[:4000]}\n--- cura.log tail ---\n{tail}"
+        text = f"--- cura.log tail ---\n{tail}"
+        fatal = self.fatal_error()
+        if fatal:  # a native crash: Python's fault handler wrote the threads' stacks to stdout
+            text = f"--- Cura crashed (cura.out) ---\n{fatal}\n{text}"
+        return f"status: {json.dumps(self.status, indent=1, default=str)[:2500]}\n{text}"
+
+    def fatal_error(self) -> str:
+        """The fault handler's report in ``cura.out`` ("Fatal Python error: ..." and the stacks), or ''."""
+        start = self.cura_out.find("Fatal Python error")
+        return self.cura_out[start:start + 6000] if start >= 0 else ""
 
 
 def _missing() -> list[str]:
@@ -168,6 +177,21 @@ def install_from_package(plugins: Path, build_dir: Path) -> Path:
     if not (target / "plugin.json").is_file():
         raise CuraTierError(f"{package} has no {prefix}plugin.json")
     return package
+
+
+def _cura_command() -> list[str]:
+    """``cura``, in a network namespace of its own when the machine allows one.
+
+    Cura listens for its engine on 127.0.0.1:49674 and up; another process's connection that happens
+    to use one of those ports makes the bind fail, and Cura 4.13 at times crashes natively on that
+    path. A private loopback makes every session start on a clean port range.
+    """
+    isolated = ["unshare", "--net", "sh", "-c", "ip link set lo up && exec cura"]
+    if shutil.which("unshare") and shutil.which("ip"):
+        probe = subprocess.run(isolated[:-1] + ["ip link set lo up"], capture_output=True, check=False)
+        if probe.returncode == 0:
+            return isolated
+    return ["cura"]
 
 
 def _free_display() -> int:
@@ -276,7 +300,7 @@ def run_cura(job: dict, folder: Path, *, timeout_s: float = 300.0, extra_plugins
             if xvfb.poll() is not None:
                 raise CuraTierError(f"Xvfb :{display} exited: {(folder / 'xvfb.log').read_text()[-500:]}")
             time.sleep(0.1)
-        cura = subprocess.Popen(["cura"], env=env, stdout=cura_out, stderr=subprocess.STDOUT, cwd=folder)
+        cura = subprocess.Popen(_cura_command(), env=env, stdout=cura_out, stderr=subprocess.STDOUT, cwd=folder)
         while time.monotonic() - started < timeout_s:
             if status_path.exists():
                 try:

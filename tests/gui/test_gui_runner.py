@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import shlex
+import socket
+import subprocess
+import sys
+
 import cura_runner
 import pytest
 from cura_profile import data_dir, seed_profile
@@ -35,3 +40,28 @@ def test_log_errors_are_grouped_with_their_traceback():
     blocks = run.error_blocks("DelaunayInfill")
     assert len(blocks) == 1 and "ValueError: why" in blocks[0]
     assert run.error_blocks("Toolbox") == ["2026-01-01 10:00:02,000 - ERROR - [MainThread] Toolbox.x [9]: no network"]
+
+
+def test_a_native_crash_is_reported_with_its_stacks():
+    out = "QML noise\nFatal Python error: Segmentation fault\n\nThread 0x1 (most recent call first):\n  <no Python frame>\n"
+    run = cura_runner.CuraRun(folder=None, status={"ok": None}, cura_log="last line", cura_out=out, seconds=1.0)
+    assert run.fatal_error().startswith("Fatal Python error: Segmentation fault")
+    assert "<no Python frame>" in run.failure() and "last line" in run.failure()
+    quiet = cura_runner.CuraRun(folder=None, status={"ok": True}, cura_log="", cura_out="QML noise\n", seconds=1.0)
+    assert quiet.fatal_error() == "" and "crashed" not in quiet.failure()
+
+
+def test_cura_gets_a_private_loopback_when_the_machine_allows_it():
+    """Other processes' connections on Cura's engine ports crash Cura 4.13 at times (see _cura_command)."""
+    command = cura_runner._cura_command()
+    if command == ["cura"]:  # no namespaces here: Cura runs as a user starts it, nothing to check
+        return
+    assert command[:2] == ["unshare", "--net"] and command[-1].endswith("exec cura")
+    with socket.socket() as busy:  # the host's 49674 busy; inside the namespace it is free
+        busy.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        busy.bind(("127.0.0.1", 49674))
+        busy.listen(1)
+        probe = "import socket; s = socket.socket(); s.bind(('127.0.0.1', 49674)); s.listen(1); print('ok')"
+        inner = command[-1].replace("exec cura", f"{shlex.quote(sys.executable)} -c {shlex.quote(probe)}")
+        result = subprocess.run(command[:-1] + [inner], capture_output=True, text=True, check=False)
+    assert result.stdout.strip() == "ok", result.stderr

@@ -60,6 +60,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
+import socket
 import subprocess
 import time
 import traceback
@@ -320,6 +321,7 @@ class GuiDriver(Extension):
             yield 1.0
             yield self.wait_until(lambda: not checker.needToWaitForResult, 30, "Cura's setting error check")
             self._backend_states.clear()
+            self._movePortAside(backend)
             backend.forceSlice()
             deadline = time.time() + float(action.get("attempt_s", 45))
             yield self.wait_until(lambda d=deadline: finished() or time.time() > d, action.get("timeout_s", 120),
@@ -332,6 +334,28 @@ class GuiDriver(Extension):
             names = [BACKEND_STATES.get(s, s) for s in self._backend_states]
             raise RuntimeError(f"slicing did not finish: backend states {names}")
         self.record("slice_s", round(time.time() - started, 2))
+
+    def _movePortAside(self, backend) -> None:
+        """Have the next slice listen on a free port other than the one Cura listens on now.
+
+        Cura 4.13 starts a slice by closing its listening socket and at once listening on the same
+        port again; the close is not finished yet, the bind fails, and its error handler recreates
+        the socket twice per failure, which cascades over the next ports and at times crashes Cura
+        natively (segfault, no Python frame; reproduced by holding ports 49674-49676 busy, without
+        this plugin doing anything). A port that is free now avoids the failed bind altogether.
+        """
+        current = int(getattr(backend, "_port", 49674))
+        for port in range(current + 1, current + 200):
+            probe = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            try:
+                probe.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            finally:
+                probe.close()
+            backend._port = port
+            self.log(f"slice will listen on port {port} (was {current})")
+            return
 
     def _processed(self) -> bool:
         gcode = self.gcode_list()

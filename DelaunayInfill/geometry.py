@@ -26,7 +26,9 @@ __all__ = [
     "SHAPELY2",
     "as_area",
     "contains_xy",
+    "distances",
     "empty_area",
+    "polygons_from",
     "polygons_of",
     "rings_of",
     "to_multipolygon",
@@ -57,6 +59,25 @@ def contains_xy(geometry: BaseGeometry, x, y) -> np.ndarray:
     if SHAPELY2:
         return np.asarray(shapely.contains_xy(geometry, x, y), dtype=bool)
     return np.asarray(_vectorized.contains(geometry, x, y), dtype=bool)  # pragma: no cover
+
+
+def distances(geometries, other: BaseGeometry) -> np.ndarray:
+    """Distance (mm) from each geometry to `other`, shape (n,) (vectorized on shapely 2)."""
+    if len(geometries) == 0:
+        return np.zeros(0)
+    if SHAPELY2:
+        return np.asarray(shapely.distance(np.asarray(geometries, dtype=object), other), dtype=float)
+    return np.array([g.distance(other) for g in geometries], dtype=float)  # pragma: no cover
+
+
+def polygons_from(rings) -> list[Polygon]:
+    """Polygons without holes from rings of as many corners, shape (k, m, 2) mm (vectorized on shapely 2)."""
+    rings = np.asarray(rings, dtype=float)
+    if len(rings) == 0:
+        return []
+    if SHAPELY2:
+        return list(shapely.polygons(rings))
+    return [Polygon(r) for r in rings.tolist()]  # pragma: no cover
 
 
 def polygons_of(geometry: BaseGeometry | None) -> list[Polygon]:

@@ -10,7 +10,8 @@ For every model this script
 
    * speed: median ``process_gcode`` time against the median CuraEngine slice
      time (target ratio <= 1.0), wall clock and CPU time (CPU time is steadier
-     on a shared machine; CuraEngine's is its child-process rusage);
+     on a shared machine; CuraEngine's is its child-process rusage), and the
+     ratio of the fastest runs of each (what a quiet machine gives);
    * output: filament, estimated print time, infill travel and retractions of
      Delaunay infill against Cura's grid, triangles and lines (targets: filament
      within +-3 % of grid, time <= 1.05 x grid, infill travel <= triangles).
@@ -23,7 +24,8 @@ are compared like for like.
 
 With ``--stages`` a third table splits one more ``process_gcode`` run (not
 the timed ones) into its stages: parsing, infill areas, pattern lookups and
-builds, clipping and routing, G-code writing, the rest.
+builds, clipping and routing, rebuilding the modifiers' shapes from Cura's
+line ends, sharing the route among Cura's FILL blocks, G-code writing, the rest.
 
 Usage::
 
@@ -55,6 +57,8 @@ STAGES = (
     ("areas", "DelaunayInfill.gcode.process", "mesh_layer"),
     ("patterns", "DelaunayInfill.gcode.process", "PatternCache.get"),
     ("clip + route", "DelaunayInfill.gcode.process", "_Run._clip"),
+    ("modifier split", "DelaunayInfill.gcode.process", "split_by_line_ends"),
+    ("runs to blocks", "DelaunayInfill.gcode.process", "_plan_runs"),
     ("write G-code", "DelaunayInfill.gcode.process", "emit_block"),
 )
 
@@ -196,8 +200,8 @@ def run(model_names: list[str], density: float, out: str, repeats: int = 3, stag
                 cpu.append(_children_cpu() - before)
                 runs.append(result.seconds)
             with open(path, encoding="utf-8") as f:
-                slices[pattern] = (f.read(), statistics.median(runs), statistics.median(cpu))
-        grid_text, slice_seconds, slice_cpu = slices["grid"]
+                slices[pattern] = (f.read(), statistics.median(runs), statistics.median(cpu), min(runs))
+        grid_text, slice_seconds, slice_cpu, slice_best = slices["grid"]
         chunks = split_like_cura(grid_text)
         times, cpu_times, layers, report = [], [], None, None
         for _ in range(repeats):
@@ -212,7 +216,8 @@ def run(model_names: list[str], density: float, out: str, repeats: int = 3, stag
         if stages:
             stage_rows.append((name, slice_seconds, stage_times(chunks)))
         speed_rows.append((name, grid_text.count("\n"), slice_seconds, process_seconds, process_seconds / slice_seconds,
-                           slice_cpu, process_cpu, process_cpu / slice_cpu, len(report.failed_layers)))
+                           slice_cpu, process_cpu, process_cpu / slice_cpu, min(times) / slice_best,
+                           len(report.failed_layers)))
         stats = {p: gcode_stats(slices[p][0]) for p in PATTERNS}
         stats["delaunay"] = gcode_stats(new_text)
         for pattern, s in stats.items():
@@ -221,14 +226,16 @@ def run(model_names: list[str], density: float, out: str, repeats: int = 3, stag
 
 
 def format_tables(speed_rows, output_rows, density, stage_rows=()) -> str:
-    out = [f"Density {density:g} %, 0.2 mm layers, 0.4 mm line width, CuraEngine {_engine_version()}.", ""]
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    out = [f"Density {density:g} %, 0.2 mm layers, 0.4 mm line width, CuraEngine {_engine_version()}, "
+           f"load average {load:.2f}.", ""]
     out += ["| model | G-code lines | CuraEngine slice, wall (s) | process_gcode, wall (s) | ratio (target <= 1.0) "
-            "| CuraEngine CPU (s) | process_gcode CPU (s) | CPU ratio | failed layers |",
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for name, lines, s, p, ratio, s_cpu, p_cpu, cpu_ratio, failed in speed_rows:
+            "| CuraEngine CPU (s) | process_gcode CPU (s) | CPU ratio | ratio of fastest runs | failed layers |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for name, lines, s, p, ratio, s_cpu, p_cpu, cpu_ratio, best_ratio, failed in speed_rows:
         mark = "" if ratio <= 1.0 else " (over)"
         out.append(f"| {name} | {lines} | {s:.3f} | {p:.3f} | {ratio:.2f}x{mark} | {s_cpu:.3f} | {p_cpu:.3f} | "
-                   f"{cpu_ratio:.2f}x | {failed} |")
+                   f"{cpu_ratio:.2f}x | {best_ratio:.2f}x | {failed} |")
     out += ["", "| model | infill | filament (m) | vs grid (target +-3 %) | print time, own estimate (min) | "
                 "vs grid (target <= 1.05x) | time in file (min) | infill travel (m) | vs triangles (target <= 1.0x) | "
                 "infill retractions |",

@@ -20,7 +20,16 @@ from scipy.spatial import cKDTree
 from shapely.geometry import LineString, MultiLineString, MultiPoint, Polygon
 from shapely.validation import make_valid
 
-from ..geometry import boundary_segments, contains_xy, empty_area, polygons_of, to_multipolygon, unary_union
+from ..geometry import (
+    boundary_segments,
+    contains_xy,
+    distances,
+    empty_area,
+    polygons_from,
+    polygons_of,
+    to_multipolygon,
+    unary_union,
+)
 from .read import FILL, SKIN, WALL_INNER, WALL_OUTER, LayerParse
 
 __all__ = [
@@ -63,10 +72,6 @@ class MeshLayer:
 def segments_of(moves: dict, mask: np.ndarray) -> np.ndarray:
     """The masked moves as segments, shape (k, 2, 2) (start, end; x, y), mm."""
     return np.stack([moves["x0"][mask], moves["y0"][mask], moves["x1"][mask], moves["y1"][mask]], axis=1).reshape(-1, 2, 2)
-
-
-def _segments(parse: LayerParse, mask: np.ndarray) -> np.ndarray:
-    return segments_of(parse.moves, mask)
 
 
 def runs_of(parse: LayerParse, mask: np.ndarray) -> list[np.ndarray]:
@@ -211,12 +216,18 @@ class _OwnerGrid:
         _, stop = np.nonzero(runs == -1)  # row-major order: the i-th stop ends the i-th run
         if len(rows) == 0:
             return empty_area()
+        # Runs with the same columns in consecutive rows make one taller rectangle: the same
+        # cells, far fewer polygons for the union.
+        order = np.lexsort((rows, stop, first))
+        rows, first, stop = rows[order], first[order], stop[order]
+        new = np.r_[True, (first[1:] != first[:-1]) | (stop[1:] != stop[:-1]) | (rows[1:] != rows[:-1] + 1)]
+        top = np.r_[rows[np.flatnonzero(new)[1:] - 1], rows[-1]]  # each rectangle's last row
+        rows, first, stop = rows[new], first[new], stop[new]
         x0, x1 = self.x0 + first * self.step, self.x0 + stop * self.step
-        y0, y1 = self.y0 + rows * self.step, self.y0 + (rows + 1) * self.step
-        return to_multipolygon(unary_union([
-            Polygon([(a, c), (b, c), (b, d), (a, d)])
-            for a, b, c, d in zip(x0.tolist(), x1.tolist(), y0.tolist(), y1.tolist(), strict=True)
-        ]))
+        y0, y1 = self.y0 + rows * self.step, self.y0 + (top + 1) * self.step
+        corners = np.stack([np.stack([x0, y0], axis=1), np.stack([x1, y0], axis=1),
+                            np.stack([x1, y1], axis=1), np.stack([x0, y1], axis=1)], axis=1)
+        return to_multipolygon(unary_union(polygons_from(corners)))
 
 
 def _owner_grid(area, fills: list[np.ndarray], spacings: list[float], step: float) -> _OwnerGrid | None:
@@ -231,10 +242,20 @@ def _owner_grid(area, fills: list[np.ndarray], spacings: list[float], step: floa
     grid = np.full(gx.shape, -1, dtype=np.int64)
     pts = pts[inside]
     if len(pts):
+        # Distances in line spacings.  A first pass looks no further than `bound` spacings (far
+        # cheaper); only where no mesh's lines are that near are all distances measured in full.
+        # Nearer than the bound beats anything beyond it, so the owners are those of a full search.
+        bound = 1.0
         dist = np.full((len(fills), len(pts)), np.inf)
-        for k, (fill, spacing) in enumerate(zip(fills, spacings, strict=True)):
-            if len(fill):
-                dist[k] = cKDTree(sample_segments(fill, step / 2)).query(pts)[0] / spacing
+        trees = [cKDTree(sample_segments(fill, step / 2)) if len(fill) else None for fill in fills]
+        for k, (tree, spacing) in enumerate(zip(trees, spacings, strict=True)):
+            if tree is not None:
+                dist[k] = tree.query(pts, distance_upper_bound=bound * spacing)[0] / spacing
+        far = ~(dist.min(axis=0) < 0.99 * bound)  # 0.99: clear of rounding at the bound
+        if far.any():
+            for k, (tree, spacing) in enumerate(zip(trees, spacings, strict=True)):
+                if tree is not None:
+                    dist[k, far] = tree.query(pts[far])[0] / spacing
         grid.ravel()[inside] = np.argmin(dist, axis=0)
     return _OwnerGrid(minx, miny, step, grid)
 
@@ -399,7 +420,7 @@ def between_lines(fill: np.ndarray, max_gap_factor: float = 1.6):
                 np.outer(la, u) + oa * n, np.outer(ha, u) + oa * n,
                 np.outer(hb, u) + ob * n, np.outer(lb, u) + ob * n,
             ], axis=1)
-            quads.extend(Polygon(c) for c in corners.tolist())
+            quads.extend(polygons_from(corners))
         del line_id
     if not quads:
         return None
@@ -555,10 +576,12 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
     slivers = [p for p in polygons_of(host.difference(core)) if p.area > 1e-9]
     if slivers and any(not c.is_empty for c in children):
         grown = [[] for _ in children]
-        for piece in slivers:
-            dist = [piece.distance(c) if not c.is_empty else np.inf for c in children]
-            k = int(np.argmin(dist))
-            if dist[k] <= 1e-6 + 0.1 * width:
+        # (children, slivers): every sliver's distance to every modifier at once
+        dist = np.array([distances(slivers, c) if not c.is_empty else np.full(len(slivers), np.inf) for c in children])
+        nearest = np.argmin(dist, axis=0)
+        near = dist[nearest, np.arange(len(slivers))] <= 1e-6 + 0.1 * width
+        for piece, k, ok in zip(slivers, nearest.tolist(), near.tolist(), strict=True):
+            if ok:
                 grown[k].append(piece)
         for k, extra in enumerate(grown):
             if extra:
@@ -617,7 +640,7 @@ def mesh_layer(
     skin_mask = extr & parse.kind_mask(SKIN)
     # the wall, skin and FILL segments at once; each class is a selection of them
     used = wall_mask | skin_mask | fill_mask
-    segments = _segments(parse, used)
+    segments = parse.xy_segments()[used]
     fill = segments[fill_mask[used]]
 
     key = None

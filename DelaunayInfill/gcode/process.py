@@ -216,10 +216,22 @@ def _fingerprint(area) -> tuple:
     return fp
 
 
+def _printed_kinds(parse: LayerParse) -> set[int]:
+    """``mesh index * 64 + kind`` of every feature the layer extrudes (remembered with the parse)."""
+    hit = parse._derived.get("printed kinds")
+    if hit is None:
+        m, extruding = parse.moves, parse.extruding()
+        hit = parse._derived["printed kinds"] = set(np.unique(m["mesh"][extruding] * 64 + m["kind"][extruding]).tolist())
+    return hit
+
+
 def _has_both_walls(parse: LayerParse, mesh: str) -> bool:
     """Whether `mesh` prints an outer and an inner wall in this layer (else `wall_line_width` is None)."""
-    printed = parse.mesh_mask(mesh) & parse.extruding()
-    return bool((printed & parse.kind_mask(WALL_OUTER)).any()) and bool((printed & parse.kind_mask(WALL_INNER)).any())
+    if mesh not in parse.meshes:
+        return False
+    base = parse.meshes.index(mesh) * 64  # kinds (TYPE_CODES) are below 64
+    printed = _printed_kinds(parse)
+    return base + WALL_OUTER in printed and base + WALL_INNER in printed
 
 
 def _move_seconds(moves: dict, acceleration: float) -> np.ndarray:
@@ -521,6 +533,7 @@ class _Run:
         dt = 0.0
         retraction = self._retraction()
         old_times = None  # seconds of each of Cura's moves (computed at the first replaced block)
+        layer_epm: dict = {}  # E per mm of a mesh's FILL (key: its name) and of all FILL (key: None)
         for name in normal:
             g = geo[name]
             lw = lw_of[name]
@@ -588,7 +601,7 @@ class _Run:
             for bi in my_blocks:
                 blk = blocks[bi]
                 mask = (m["block"] == bi)
-                had_fill = bool((mask & extr).any())
+                had_fill = extrudes = bool((mask & extr).any())
                 new_paths = assigned.get(bi, [])
                 if had_fill and not new_paths and paths and blk.mesh in covered_children:
                     # The host's seamless pattern fills this modifier's area (printed from other
@@ -607,11 +620,17 @@ class _Run:
                 if blk.unsupported or (not new_paths and had_fill):
                     stats["blocks_kept"] += 1
                     continue
-                epm = e_per_mm(parse, mask & extr)
+                # a block that extrudes nothing takes its mesh's FILL rate, else the layer's (both
+                # remembered for the layer: a modifier's travel-only blocks ask again and again)
+                epm = e_per_mm(parse, mask & extr) if extrudes else None
                 if epm is None:
-                    epm = e_per_mm(parse, extr & is_fill & parse.mesh_mask(blk.mesh))
+                    if blk.mesh not in layer_epm:
+                        layer_epm[blk.mesh] = e_per_mm(parse, extr & is_fill & parse.mesh_mask(blk.mesh))
+                    epm = layer_epm[blk.mesh]
                 if epm is None:
-                    epm = e_per_mm(parse, extr & is_fill)
+                    if None not in layer_epm:
+                        layer_epm[None] = e_per_mm(parse, extr & is_fill)
+                    epm = layer_epm[None]
                 if epm is None:
                     if new_paths:
                         stats["blocks_kept"] += 1
@@ -694,14 +713,15 @@ class _Run:
 
     def _fraction_inside(self, fill: np.ndarray, area, step: float) -> float:
         """`fraction_inside`, remembered for the last few (lines, area) pairs (prisms repeat them)."""
-        key = (id(area), fill.shape, round(step, 6))
+        # the lines' bytes in the key: modifiers with as many lines must not evict each other
+        key = (id(area), fill.shape, fill.tobytes(), round(step, 6))
         hit = self.inside_memo.get(key)
-        if hit is not None and hit[0] is area and np.array_equal(hit[1], fill):
-            return hit[2]
+        if hit is not None and hit[0] is area:
+            return hit[1]
         value = fraction_inside(fill, area, step)
         if len(self.inside_memo) >= 32:
             self.inside_memo.pop(next(iter(self.inside_memo)))
-        self.inside_memo[key] = (area, fill, value)
+        self.inside_memo[key] = (area, value)
         return value
 
     def _grown(self, area, by: float):

@@ -195,6 +195,14 @@ class LayerParse:
             hit = self._remember(("kind", kind), self.moves["kind"] == kind)
         return hit
 
+    def xy_segments(self) -> np.ndarray:
+        """Every move as a segment, shape (n, 2, 2) (start, end; x, y) mm (read-only)."""
+        hit = self._derived.get("xy_segments")
+        if hit is None:
+            m = self.moves
+            hit = self._remember("xy_segments", np.stack([m["x0"], m["y0"], m["x1"], m["y1"]], axis=1).reshape(-1, 2, 2))
+        return hit
+
     def xy_length(self) -> np.ndarray:
         """XY length of every move, shape (n,) mm (read-only)."""
         hit = self._derived.get("xy_length")

@@ -100,6 +100,7 @@ def _cmd_process(args) -> int:
             flow=args.flow if args.flow is not None else 1.0,
             speed=args.speed,
             relax=args.relax,
+            combing=not args.no_combing,
             meshes={name: MeshSettings(density=pct) for name, pct in args.mesh},
         )
         settings.validate()
@@ -224,6 +225,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--flow", type=_percent, metavar="PCT", help="extrusion relative to Cura's infill (default 100)")
     p.add_argument("--speed", type=_positive, metavar="MM_S", help="infill speed (default: Cura's)")
     p.add_argument("--relax", type=int, default=0, help="relaxation steps (default 0)")
+    p.add_argument("--no-combing", action="store_true",
+                   help="retract on a travel that leaves the part instead of going round inside it")
     p.add_argument("--verify", action="store_true", help="check the output against the input afterwards")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress line or summary")
     p.set_defaults(func=_cmd_process)

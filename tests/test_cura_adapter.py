@@ -105,3 +105,13 @@ def test_regions_are_lifted_by_the_raft():
     assert build_settings(snapshot)[1][0].triangles[..., 2] == pytest.approx(0.3 + 0.6 + 0.2 + 0.3 - 0.15)
     snapshot.global_values["adhesion_type"] = "brim"
     assert build_settings(snapshot)[1][0].triangles[..., 2] == pytest.approx(0.0)
+
+
+def test_combing_follows_cura_s_combing_mode():
+    star = _model("star.stl")
+    assert build_settings(_snapshot([star]))[0].combing is True  # Cura's default mode combs
+    for mode, combs in (("off", False), ("all", True), ("noskin", True), ("infill", True)):
+        assert build_settings(_snapshot([star], retraction_combing=mode))[0].combing is combs
+    snapshot = _snapshot([star])
+    snapshot.extruder_values[0]["retraction_combing_max_distance"] = 30
+    assert build_settings(snapshot)[0].combing_max_distance == 30

@@ -22,6 +22,7 @@ from DelaunayInfill.gcode import GCodeError, MeshSettings, ProcessSettings, Regi
 from DelaunayInfill.gcode.read import (
     FILL,
     MARKER,
+    WALL_OUTER,
     MachineState,
     RetractionModel,
     as_cura_list,
@@ -358,3 +359,33 @@ def test_remembered_paths_follow_the_minimum_length():
     result = SimpleNamespace(paths=[np.array([[0.0, 0.0], [5.0, 0.0]]), np.array([[9.0, 9.0], [9.1, 9.0]])])
     assert len(_Run._paths(run, result)) == 2
     assert len(_Run._paths(run, result, min_length=0.2)) == 1
+
+
+def test_travels_comb_round_the_inside_instead_of_retracting(star, star_done):
+    """The star's concave corners: a straight travel between two tips leaves the part. Combing goes
+    round inside, unretracted, and every leg stays inside the part; without it Cura's retraction is used."""
+    from shapely.geometry import LineString
+
+    from DelaunayInfill.gcode.area import runs_of
+
+    out_off, report_off = process_gcode(star, ProcessSettings(seed=3, combing=False))
+    out_on, report_on = star_done
+    assert report_off.infill_retractions > 0 and report_on.infill_retractions == 0
+    assert report_on.infill_travel_mm < 1.02 * report_off.infill_travel_mm  # the detours are short
+    # every new travel of a middle layer lies inside the star's outline (its outer wall's centre line)
+    state, r = MachineState(), RetractionModel()
+    for chunk in iter_chunks(out_on):
+        parse = parse_layer(chunk, state, r)
+        if parse.number == 40:
+            break
+    m = parse.moves
+    outline = Polygon(runs_of(parse, (m["kind"] == WALL_OUTER) & (m["de"] > 0))[0])
+    travel = (m["kind"] == FILL) & (m["de"] == 0) & ((m["x1"] != m["x0"]) | (m["y1"] != m["y0"]))
+    legs = [LineString([(a, b), (c, d)]) for a, b, c, d in zip(m["x0"][travel], m["y0"][travel], m["x1"][travel], m["y1"][travel])]
+    assert len(legs) > 10
+    assert all(leg.within(outline.buffer(0.11)) for leg in legs)
+
+
+def test_a_detour_longer_than_the_combing_limit_retracts(star, star_done):
+    _, limited = process_gcode(star, ProcessSettings(seed=3, combing_max_distance=5.0))
+    assert limited.infill_retractions > 0 and star_done[1].infill_retractions == 0

@@ -128,6 +128,8 @@ def build_settings(snapshot):
         retraction_prime_speed=_number(extruder.get("retraction_prime_speed")),
         retraction_hop=hop,
         retraction_min_travel=_number(extruder.get("retraction_min_travel")),
+        combing=str(glob.get("retraction_combing") or "all") != "off",  # every other mode combs in infill
+        combing_max_distance=max(0.0, _number(extruder.get("retraction_combing_max_distance"), 0.0)),
         # Only a "yes" is certain: some flavours (UltiGCode) use G10/G11 regardless; the pass sees them.
         firmware_retraction=True if glob.get("machine_firmware_retract") else None,
         travel_speed=_number(extruder.get("speed_travel")),

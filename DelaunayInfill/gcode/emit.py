@@ -13,8 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geometry import contains_xy
-from ..routing import clip_segments
+from ..combing import segments_inside
 from .read import MachineState, RetractionModel
 
 __all__ = ["EmitParams", "EmitResult", "emit_block", "fmt"]
@@ -48,6 +47,10 @@ class EmitParams:
     step: float = 0.2
     layer_z: float | None = None
     xy_words: dict | None = None  # cache: id(path) -> (path, its "G1 X.. Y.." words); paths repeat layer after layer
+    # a travel that would leave `part` goes round inside it instead (a combing.CombingArea of the
+    # part; None: retract as Cura does); a detour longer than comb_max mm retracts (0: no limit)
+    comb: object = None
+    comb_max: float = 0.0
 
 
 @dataclass
@@ -74,22 +77,7 @@ def _travels_inside(starts: np.ndarray, ends: np.ndarray, part, step: float) -> 
 
     `step` is kept for the callers' signature; the test no longer samples.
     """
-    k = len(starts)
-    if k == 0:
-        return np.zeros(0, dtype=bool)
-    known = np.isfinite(starts).all(axis=1) & np.isfinite(ends).all(axis=1)
-    result = np.zeros(k, dtype=bool)
-    if part is None or part.is_empty or not known.any():
-        return result
-    segs = np.stack([starts[known], ends[known]], axis=1)
-    length = np.hypot(*(segs[:, 1] - segs[:, 0]).T)
-    pieces, source = clip_segments(segs, part, return_index=True)
-    inside = np.bincount(source, np.hypot(*(pieces[:, 1] - pieces[:, 0]).T), minlength=len(segs))
-    # zero-length travels: inside when their point is
-    point = length <= 1e-9
-    inside_point = contains_xy(part, segs[:, 0, 0], segs[:, 0, 1])
-    result[known] = np.where(point, inside_point, inside >= length - 1e-6)
-    return result
+    return segments_inside(starts, ends, part)
 
 
 def _xy_words(paths: list[np.ndarray], cache: dict | None) -> list[str]:
@@ -295,6 +283,8 @@ class _Writer:
             return
         if d < 1e-9:
             return
+        if not free and self.p.comb is not None and self._comb(x, y):
+            return
         if not free and d >= self.p.min_travel and self.r.seen:
             if self.depth <= 1e-9 and not self.fw:
                 self.retract()
@@ -304,6 +294,24 @@ class _Writer:
         self._time(d, self.f)
         self.out.travel_mm += d
         self.x, self.y = x, y
+
+    def _comb(self, x: float, y: float) -> bool:
+        """Travel to (x, y) round the inside of the part, unretracted; False when there is no such path."""
+        bends = self.p.comb.path((self.x, self.y), (x, y))
+        if bends is None:
+            return False
+        points = np.vstack([[self.x, self.y], bends, [x, y]])
+        legs = np.hypot(*np.diff(points, axis=0).T)
+        if self.p.comb_max > 0 and float(legs.sum()) > self.p.comb_max:
+            return False
+        feed = self.set_feed(self.p.travel_f)
+        for (bx, by), leg in zip(points[1:].tolist(), legs.tolist(), strict=True):
+            self.out.lines.append(f"G0 {feed}X{bx:.3f} Y{by:.3f}")
+            feed = ""
+            self._time(leg, self.f)
+            self.out.travel_mm += leg
+        self.x, self.y = x, y
+        return True
 
     def extrude_all(self, tpl: _Template, free: list[bool]):
         """All paths of `tpl` with their travels before them.
@@ -329,12 +337,14 @@ class _Writer:
         print_feed = _feed_word(print_f)
         min_travel = self.p.min_travel
         seen = self.r.seen
+        combing = self.p.comb is not None
         times_d, times_f = self._dist, self._feed
         for k, (hx, hy) in enumerate(tpl.heads):
             d = math.hypot(hx - self.x, hy - self.y)
             if d < 1e-9:
                 pass
-            elif (free[k] or d < min_travel or not seen or self.depth > 1e-9 or self.fw) and math.isfinite(d):
+            elif (free[k] or (not combing and (d < min_travel or not seen or self.depth > 1e-9 or self.fw))) \
+                    and math.isfinite(d):
                 # `travel` without a retraction, inline: most travels of a block are like this
                 if abs(travel_f - self.f) > 1e-9:
                     self.f = travel_f

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..combing import CombingArea
 from ..geometry import contains_xy, polygons_of, to_multipolygon, unary_union
 from ..routing import clip_segments, order_paths
 from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of, split_by_line_ends
@@ -314,6 +315,7 @@ class _Run:
         self.inside_memo: dict[tuple, tuple] = {}
         self.unions: dict[tuple, tuple] = {}
         self.xy_words: dict[int, tuple] = {}
+        self._combing: dict[int, CombingArea] = {}  # id(part) -> its combing area (parts repeat on prisms)
         self.e_before: dict[int, float] = {}
         self.e_delta: dict[int, float] = {}
         self.time_delta = 0.0
@@ -657,6 +659,8 @@ class _Run:
                     step=max(lw / 2, 0.1),
                     layer_z=parse.z,
                     xy_words=self.xy_words,
+                    comb=self._combing_area(travel_part, lw) if s.combing else None,
+                    comb_max=s.combing_max_distance,
                 )
                 out = emit_block(new_paths, blk.before, blk.after, params, blk.extra_lines)
                 replaced[bi] = out.lines
@@ -809,6 +813,17 @@ class _Run:
                 self.clips.pop(next(iter(self.clips)))
             self.clips[key] = hit
         return hit[1]
+
+    def _combing_area(self, part, lw: float) -> CombingArea | None:
+        """The combing area of `part` (kept while the same part object comes back, as on prisms)."""
+        if part is None or part.is_empty:
+            return None
+        hit = self._combing.get(id(part))
+        if hit is None or hit.source is not part:
+            if len(self._combing) >= 16:
+                self._combing.pop(next(iter(self._combing)))
+            hit = self._combing[id(part)] = CombingArea(part, margin=lw, tolerance=lw / 4)
+        return hit
 
     def _paths(self, result, min_length: float = 0.0) -> list[np.ndarray]:
         """The result's paths as float arrays, the same objects for a remembered clip result.

@@ -51,6 +51,10 @@ class ProcessSettings:
     retraction_prime_speed: float | None = None
     retraction_hop: float | None = None
     retraction_min_travel: float | None = None
+    # travel round concave corners and holes inside the part instead of retracting (Cura's
+    # retraction_combing); a combed travel longer than combing_max_distance mm retracts (0: no limit)
+    combing: bool = True
+    combing_max_distance: float = 0.0
     firmware_retraction: bool | None = None
     travel_speed: float | None = None
     acceleration: float = 3000.0

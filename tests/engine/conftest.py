@@ -140,10 +140,12 @@ def cli_command() -> list[str]:
 
 
 def cli_arguments(sliced: Sliced) -> list[str]:
-    """``--density`` and ``--mesh NAME:PCT`` for a case, as a user would give them."""
+    """``--density``, ``--mesh NAME:PCT`` and ``--no-combing`` for a case, as a user would give them."""
     args = ["--density", f"{100 * sliced.case.density:g}"]
     for name, percent in sliced.case.mesh_densities().items():
         args += ["--mesh", f"{name}:{percent:g}"]
+    if sliced.case.settings.get("retraction_combing") == "off":
+        args.append("--no-combing")  # what Cura was told: retract rather than travel round inside
     return args
 
 

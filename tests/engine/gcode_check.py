@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
-from shapely.geometry import MultiLineString, Polygon
+from shapely.geometry import MultiLineString, Point, Polygon
 from shapely.ops import unary_union
 from shapely.prepared import prep
 
@@ -555,21 +555,28 @@ def check_extrusion(orig: Parsed, new: Parsed, geometry: SliceGeometry, *, rel_t
     res.figures["fill_travels"] = len(travel)
     leaving = 0
     unretracted_leaving = 0
+    leaving_one_island = 0  # a travel that leaves the part between two places of the same island
     for seq in np.unique(travel[:, C_LAYER]).astype(int) if len(travel) else []:
         t = travel[travel[:, C_LAYER] == seq]
         z_top = new.layers[seq]["z"]
         part = geometry.section(z_top - 0.1 if not math.isnan(z_top) else 0.1)
-        prepared = prep(part.buffer(0.05))
+        grown = part.buffer(0.05)
+        prepared = prep(grown)
+        islands = [prep(g) for g in getattr(grown, "geoms", [grown])]
         for row in t:
             seg = ((row[C_X0], row[C_Y0]), (row[C_X1], row[C_Y1]))
             if not prepared.contains(MultiLineString([seg])):
                 leaving += 1
+                ends = [Point(seg[0]), Point(seg[1])]
+                if any(island.contains(ends[0]) and island.contains(ends[1]) for island in islands):
+                    leaving_one_island += 1
                 if row[C_RETRACTED] == 0:
                     unretracted_leaving += 1
                     if cura_retracts and unretracted_leaving <= 3:
                         res.fail(f"line {int(row[C_LINE])}: travel leaves the part without retraction")
     res.figures["fill_travels_leaving_part"] = leaving
     res.figures["unretracted_leaving"] = unretracted_leaving
+    res.figures["fill_travels_leaving_one_island"] = leaving_one_island
     # retractions inside the new infill are Cura's: same amount, same speeds
     fill_o, fill_n = orig.moves[:, C_FILL] == 1, new.moves[:, C_FILL] == 1
     old_ret = orig.moves[pure_o & (orig.moves[:, C_DE] < 0)]

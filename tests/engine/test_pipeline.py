@@ -58,6 +58,16 @@ def test_3_extrusion_continuity_and_travel(processed, parsed_pair):
     assert len(new_fill) and not (len(old_fill) == len(new_fill) and (old_fill[:, 2:6] == new_fill[:, 2:6]).all())
 
 
+def test_3_infill_travel_combs_round_the_inside_of_the_part(processed, parsed_pair):
+    """No new infill travel leaves the part between two places of one island: it goes round inside
+    (the H-bracket's and the star's concave corners)."""
+    orig, new = parsed_pair
+    case, _, geometry = _context(processed)
+    result = gc.check_extrusion(orig, new, geometry)
+    if not (processed.path.endswith("cli.gcode") and case.settings.get("retraction_combing") == "off"):
+        assert result.figures["fill_travels_leaving_one_island"] == 0, result.figures
+
+
 def test_4_region_densities_within_two_points(processed, parsed_pair):
     _, new = parsed_pair
     case, settings, geometry = _context(processed)

@@ -54,6 +54,16 @@ def _offset(text: str) -> tuple[float, ...]:
     return values
 
 
+def _window(text: str) -> tuple[float, float, float, float]:
+    try:
+        x0, y0, x1, y1 = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X0,Y0,X1,Y1 in mm, got {text!r}") from None
+    if not (x1 > x0 and y1 > y0):
+        raise argparse.ArgumentTypeError(f"the window needs X1 > X0 and Y1 > Y0, got {text!r}")
+    return x0, y0, x1, y1
+
+
 class _Progress:
     """One updating progress line on stderr for long runs."""
 
@@ -167,7 +177,7 @@ def _cmd_preview(args) -> int:
             return EXIT_REFUSED
     out = args.output or f"{os.path.splitext(os.path.basename(args.input))[0]}_layer{args.layer}.png"
     try:
-        render_layer(args.input, args.layer, out, before=args.before, occurrence=args.occurrence)
+        render_layer(args.input, args.layer, out, before=args.before, occurrence=args.occurrence, window=args.window)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_REFUSED
@@ -238,6 +248,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", metavar="layer.png")
     p.add_argument("--before", metavar="ORIGINAL.gcode", help="draw this file's layer beside it for comparison")
     p.add_argument("--occurrence", type=int, default=0, help="which layer N when numbers repeat (one-at-a-time)")
+    p.add_argument("--window", type=_window, metavar="X0,Y0,X1,Y1", help="zoom to this part of the bed (mm)")
     p.set_defaults(func=_cmd_preview)
 
     p = sub.add_parser("demo", help="run the bundled demo (star with the paper's Figure 10 densities, H-bracket)",

@@ -190,3 +190,20 @@ def test_module_entry_point_matches(star_gcode, tmp_path):
                            str(tmp_path / "m.gcode"), "-q"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "m.gcode").exists()
+
+
+def test_preview_marks_retracted_travel_and_zooms(star_gcode, tmp_path):
+    from DelaunayInfill.gcode.preview import layer_segments
+
+    retracting, combing = tmp_path / "retracting.gcode", tmp_path / "combing.gcode"
+    assert main(["process", str(star_gcode), "-o", str(retracting), "--seed", "3", "--no-combing", "-q"]) == 0
+    assert main(["process", str(star_gcode), "-o", str(combing), "--seed", "3", "-q"]) == 0
+    # the star's concave corners: retracted straight travels without combing, none with it
+    assert len(layer_segments(retracting, 25)["travel, retracted"]) > 0
+    assert len(layer_segments(combing, 25)["travel, retracted"]) == 0
+    png = tmp_path / "zoom.png"
+    assert main(["preview", str(combing), "--before", str(retracting), "--layer", "25",
+                 "--window", "96,86,130,124", "-o", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(SystemExit):
+        main(["preview", str(combing), "--layer", "25", "--window", "5,5,1,1"])

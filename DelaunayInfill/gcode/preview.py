@@ -72,7 +72,13 @@ def _group(parse) -> dict[str, np.ndarray]:
     ok = moved & np.isfinite(m["x0"]) & np.isfinite(m["y0"])
     extr = ok & (m["de"] > 0)
     segs = segments_of(m, slice(None))
-    out = {"travel": segs[ok & ~extr]}
+    # a travel between a retraction (E-only move backwards) and the next prime is made retracted:
+    # where the nozzle may string, so the view marks it apart
+    e_only = ~moved & (m["de"] != 0)
+    steps = np.where(e_only, np.sign(m["de"]), 0.0)
+    retracted = np.cumsum(-steps) > 0
+    travel = ok & ~extr
+    out = {"travel": segs[travel & ~retracted], "travel, retracted": segs[travel & retracted]}
     for code in np.unique(m["kind"][extr]):
         out[_NAMES.get(int(code), "NONE")] = segs[extr & (m["kind"] == code)]
     return out
@@ -83,7 +89,12 @@ def _draw(ax, groups, title, line_width):
 
     handles = []
     if len(groups.get("travel", [])):
-        lc = LineCollection(groups["travel"], colors="#9a9a9a", linewidths=0.3, linestyles="dotted", label="travel")
+        lc = LineCollection(groups["travel"], colors="#606060", linewidths=0.6, linestyles="dotted", label="travel")
+        ax.add_collection(lc)
+        handles.append(lc)
+    if len(groups.get("travel, retracted", [])):
+        lc = LineCollection(groups["travel, retracted"], colors="#9467bd", linewidths=1.2, linestyles="dashed",
+                            label="travel, retracted")
         ax.add_collection(lc)
         handles.append(lc)
     for name, (colour, label) in _STYLE.items():
@@ -101,7 +112,7 @@ def _draw(ax, groups, title, line_width):
     return handles
 
 
-def render_layers(panels, out_path, *, dpi: int = 150, line_width: float = 1.0) -> str:
+def render_layers(panels, out_path, *, dpi: int = 150, line_width: float = 1.0, window=None) -> str:
     """Draw one or more layer views side by side into a PNG.
 
     Parameters
@@ -109,6 +120,8 @@ def render_layers(panels, out_path, *, dpi: int = 150, line_width: float = 1.0) 
     panels : sequence of (groups, title)
         `layer_segments` results with their titles.
     out_path : path-like
+    window : (x0, y0, x1, y1), optional
+        The part of the bed to show, mm (default: everything the layer prints).
 
     Returns
     -------
@@ -131,6 +144,9 @@ def render_layers(panels, out_path, *, dpi: int = 150, line_width: float = 1.0) 
     handles = []
     for ax, (groups, title) in zip(axes[0], panels, strict=True):
         handles = _draw(ax, groups, title, line_width) or handles
+        if window is not None:
+            ax.set_xlim(window[0], window[2])
+            ax.set_ylim(window[1], window[3])
     by_label = {h.get_label(): h for ax in axes[0] for h in ax.collections}
     fig.legend(by_label.values(), by_label.keys(), loc="lower center", ncol=min(7, len(by_label)), fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
@@ -142,10 +158,11 @@ def render_layers(panels, out_path, *, dpi: int = 150, line_width: float = 1.0) 
     return out_path
 
 
-def render_layer(path, layer: int, out_path, *, before=None, occurrence: int = 0, dpi: int = 150) -> str:
-    """PNG top view of one layer; with `before`, the original on the left for comparison."""
+def render_layer(path, layer: int, out_path, *, before=None, occurrence: int = 0, dpi: int = 150, window=None) -> str:
+    """PNG top view of one layer; with `before`, the original on the left for comparison; `window`
+    (x0, y0, x1, y1) mm zooms in."""
     panels = []
     if before is not None:
         panels.append((layer_segments(before, layer, occurrence=occurrence), f"{os.path.basename(os.fspath(before))} — layer {layer}"))
     panels.append((layer_segments(path, layer, occurrence=occurrence), f"{os.path.basename(os.fspath(path))} — layer {layer}"))
-    return render_layers(panels, out_path, dpi=dpi)
+    return render_layers(panels, out_path, dpi=dpi, window=window)

@@ -115,3 +115,10 @@ def test_combing_follows_cura_s_combing_mode():
     snapshot = _snapshot([star])
     snapshot.extruder_values[0]["retraction_combing_max_distance"] = 30
     assert build_settings(snapshot)[0].combing_max_distance == 30
+
+
+def test_the_time_estimate_takes_cura_s_jerk():
+    star = _model("star.stl", jerk_infill=8)
+    assert build_settings(_snapshot([star]))[0].jerk == 20.0  # fdmprinter's default
+    assert build_settings(_snapshot([star], machine_max_jerk_xy=10))[0].jerk == 10.0
+    assert build_settings(_snapshot([star], machine_max_jerk_xy=10, jerk_enabled=True))[0].jerk == 8.0

@@ -108,6 +108,9 @@ def build_settings(snapshot):
     acceleration = _number(glob.get("machine_acceleration"), 3000.0)
     if glob.get("acceleration_enabled"):
         acceleration = _number(primary.values.get("acceleration_infill"), acceleration)
+    jerk = _number(glob.get("machine_max_jerk_xy"), 20.0)
+    if glob.get("jerk_enabled"):
+        jerk = _number(primary.values.get("jerk_infill"), jerk)
     flavor = str(glob.get("machine_gcode_flavor") or "")
     settings = ProcessSettings(
         density=_fraction(primary.values.get("infill_sparse_density")),
@@ -134,6 +137,7 @@ def build_settings(snapshot):
         firmware_retraction=True if glob.get("machine_firmware_retract") else None,
         travel_speed=_number(extruder.get("speed_travel")),
         acceleration=acceleration,
+        jerk=max(0.0, jerk),
         # width (mm) over which region densities blend into their surroundings (the tool's feather)
         feather=max(0.0, _number(getattr(snapshot, "feather_mm", 0.0), 0.0)),
     )

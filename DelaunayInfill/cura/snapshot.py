@@ -78,6 +78,8 @@ GLOBAL_KEYS = (
     "print_sequence",
     "machine_extruder_count",
     "machine_acceleration",
+    "machine_max_jerk_xy",
+    "jerk_enabled",
     "adhesion_type",
     "adhesion_extruder_nr",
 )

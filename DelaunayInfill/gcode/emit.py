@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..combing import segments_inside
+from .estimate import DEFAULT_JERK, junction_speeds, move_times
 from .read import MachineState, RetractionModel
 
 __all__ = ["EmitParams", "EmitResult", "emit_block", "fmt"]
@@ -51,13 +52,17 @@ class EmitParams:
     # part; None: retract as Cura does); a detour longer than comb_max mm retracts (0: no limit)
     comb: object = None
     comb_max: float = 0.0
+    # the time estimate's motion model (mm/s², mm/s): see estimate.py
+    acceleration: float = 3000.0
+    jerk: float = DEFAULT_JERK
 
 
 @dataclass
 class EmitResult:
     """Lines of the new block and what they do.
 
-    ``dist``/``feed`` per move (mm, mm/min) for the time estimate;
+    ``seconds`` the estimated time of the extrusion moves (corners included), ``dist``/``feed``
+    per other move (mm, mm/min) for the time estimate (each from rest to rest);
     ``net_e`` the sum of every E move of the block (extrusion, retractions and
     primes; E units), which is what the block changes the filament used by.
     """
@@ -68,6 +73,7 @@ class EmitResult:
     extrude_mm: float = 0.0
     travel_mm: float = 0.0
     retractions: int = 0
+    seconds: float = 0.0
     dist: list[np.ndarray] = field(default_factory=list)
     feed: list[np.ndarray] = field(default_factory=list)
 
@@ -109,8 +115,8 @@ class _Template:
     inside the part.
     """
 
-    __slots__ = ("part", "paths", "heads", "tails", "seg_len", "ext_first", "xy", "inner_free", "heads_arr", "tails_arr",
-                 "head_words", "counts", "count_list", "count_starts")
+    __slots__ = ("part", "paths", "heads", "tails", "seg_len", "seg_dxy", "seg_joined", "ext_first", "xy", "inner_free",
+                 "heads_arr", "tails_arr", "head_words", "counts", "count_list", "count_starts", "_seconds")
 
     def __init__(self, paths: list[np.ndarray], params: EmitParams, start, end):
         part = self.part = params.part
@@ -123,6 +129,10 @@ class _Template:
         is_ext = np.ones(len(pts), dtype=bool)
         is_ext[first] = False  # a path's first point is reached by travel
         self.seg_len = lengths[is_ext[1:]]  # step i ends at point i + 1
+        self.seg_dxy = steps[is_ext[1:]]
+        path_of = np.repeat(np.arange(len(paths)), sizes - 1)  # each extrusion step's path
+        self.seg_joined = path_of[:-1] == path_of[1:]  # corners inside a path; a travel separates paths
+        self._seconds: tuple | None = None
         # extrusion lines of path k are xy[ext_first[k] : ext_first[k + 1]]
         self.ext_first = (first - np.arange(len(paths))).tolist() + [len(self.seg_len)]
         # the paths with extrusion moves: how many each has and where they start in seg_len
@@ -143,6 +153,16 @@ class _Template:
         (hx, hy), (tx, ty) = self.heads[0], self.tails[-1]
         _remember_travel(start[0], start[1], hx, hy, params, bool(free[0]))
         _remember_travel(tx, ty, end[0], end[1], params, bool(free[-1]))
+
+    def extrusion_seconds(self, print_f: float, acceleration: float, jerk: float) -> float:
+        """Estimated time of all extrusion moves at `print_f` (mm/min), corners included."""
+        key = (print_f, acceleration, jerk)
+        if self._seconds is None or self._seconds[0] != key:
+            feed = np.full(len(self.seg_len), float(print_f))
+            corner = junction_speeds(self.seg_dxy[:, 0], self.seg_dxy[:, 1], feed, acceleration, jerk, self.seg_joined)
+            seconds = move_times(self.seg_len, feed, acceleration, entry=np.r_[0.0, corner], exit=np.r_[corner, 0.0])
+            self._seconds = (key, float(seconds.sum()))
+        return self._seconds[1]
 
     def matches(self, paths: list[np.ndarray], part) -> bool:
         return self.part is part and len(self.paths) == len(paths) and all(
@@ -399,8 +419,7 @@ class _Writer:
                 at = stop
             out.extend(lines[marks[-1] :])
             lines[:] = out
-        self.out.dist.append(tpl.seg_len)
-        self.out.feed.append(np.full(len(tpl.seg_len), print_f))
+        self.out.seconds += tpl.extrusion_seconds(print_f, self.p.acceleration, self.p.jerk)
         total_de = float(de.sum())
         self.out.extruded_e += total_de
         self.out.net_e += total_de

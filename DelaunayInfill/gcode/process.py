@@ -25,7 +25,7 @@ from ..geometry import contains_xy, polygons_of, to_multipolygon, unary_union
 from ..routing import clip_segments, order_paths
 from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of, split_by_line_ends
 from .emit import EmitParams, emit_block
-from .estimate import move_times
+from .estimate import move_seconds, move_times
 from .infer import e_per_mm, infill_density, wall_line_width
 from .read import (
     FILL,
@@ -235,12 +235,12 @@ def _has_both_walls(parse: LayerParse, mesh: str) -> bool:
     return base + WALL_OUTER in printed and base + WALL_INNER in printed
 
 
-def _move_seconds(moves: dict, acceleration: float) -> np.ndarray:
-    """Seconds of every move of a layer, shape (n,): `moves_time` one move at a time (the same figures)."""
-    dx, dy, dz = moves["x1"] - moves["x0"], moves["y1"] - moves["y0"], moves["z1"] - moves["z0"]
-    dist = np.sqrt(dx * dx + dy * dy + dz * dz)
-    dist = np.where(dist > 0, dist, np.abs(moves["de"]))
-    return move_times(dist, moves["f"], acceleration)
+def _move_seconds(moves: dict, acceleration: float, jerk: float) -> np.ndarray:
+    """Seconds of every move of a layer, shape (n,) (`estimate.move_seconds`), each FILL block timed
+    on its own: its first move starts at rest and its last one ends at rest, as the new block's."""
+    block = moves["block"]
+    return move_seconds(moves["x1"] - moves["x0"], moves["y1"] - moves["y0"], moves["z1"] - moves["z0"], moves["de"],
+                        moves["f"], acceleration, jerk, breaks=block[:-1] != block[1:])
 
 
 def _split_empty_regions(regions: list) -> tuple[list, object, list]:
@@ -661,13 +661,15 @@ class _Run:
                     xy_words=self.xy_words,
                     comb=self._combing_area(travel_part, lw) if s.combing else None,
                     comb_max=s.combing_max_distance,
+                    acceleration=self.acceleration,
+                    jerk=s.jerk,
                 )
                 out = emit_block(new_paths, blk.before, blk.after, params, blk.extra_lines)
                 replaced[bi] = out.lines
                 if old_times is None:
-                    old_times = _move_seconds(m, self.acceleration)
+                    old_times = _move_seconds(m, self.acceleration, s.jerk)
                 old_t = float(old_times[mask].sum())
-                new_t = float(move_times(np.concatenate(out.dist), np.concatenate(out.feed), self.acceleration).sum()) if out.dist else 0.0
+                new_t = out.seconds + (float(move_times(np.concatenate(out.dist), np.concatenate(out.feed), self.acceleration).sum()) if out.dist else 0.0)
                 dt += new_t - old_t
                 # Net change of the filament used: every E move of the new block minus those of Cura's.
                 old_net = float(m["de"][mask].sum())  # not after.e - before.e: Cura may G92 E0 inside

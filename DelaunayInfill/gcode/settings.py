@@ -58,6 +58,7 @@ class ProcessSettings:
     firmware_retraction: bool | None = None
     travel_speed: float | None = None
     acceleration: float = 3000.0
+    jerk: float = 20.0  # mm/s, XY corner speed limit of the time estimate (Cura's machine_max_jerk_xy)
     feather: float = 0.0
 
     def validate(self) -> None:
@@ -72,6 +73,8 @@ class ProcessSettings:
             raise ValueError(f"line width {self.line_width} mm is outside 0.05-5 mm")
         if not (0.1 <= self.flow <= 3.0):
             raise ValueError(f"flow must be between 10 % and 300 %, got {self.flow * 100:g} %")
+        if not (math.isfinite(self.jerk) and self.jerk >= 0.0):
+            raise ValueError(f"jerk must be a speed >= 0 mm/s, got {self.jerk}")
         if not (math.isfinite(self.feather) and self.feather >= 0.0):
             raise ValueError(f"feather must be a width >= 0 mm, got {self.feather}")
         if self.layout not in ("seamless", "paper"):

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..combing import segments_inside
-from .estimate import DEFAULT_JERK, junction_speeds, move_times
+from .estimate import DEFAULT_JERK, corner_ends, junction_speeds, move_times
 from .read import MachineState, RetractionModel
 
 __all__ = ["EmitParams", "EmitResult", "emit_block", "fmt"]
@@ -160,7 +160,7 @@ class _Template:
         if self._seconds is None or self._seconds[0] != key:
             feed = np.full(len(self.seg_len), float(print_f))
             corner = junction_speeds(self.seg_dxy[:, 0], self.seg_dxy[:, 1], feed, acceleration, jerk, self.seg_joined)
-            seconds = move_times(self.seg_len, feed, acceleration, entry=np.r_[0.0, corner], exit=np.r_[corner, 0.0])
+            seconds = move_times(self.seg_len, feed, acceleration, *corner_ends(corner))
             self._seconds = (key, float(seconds.sum()))
         return self._seconds[1]
 

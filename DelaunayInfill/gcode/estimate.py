@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DEFAULT_JERK", "junction_speeds", "move_seconds", "move_times", "moves_time"]
+__all__ = ["DEFAULT_JERK", "corner_ends", "junction_speeds", "move_seconds", "move_times", "moves_time"]
 
 #: mm/s: fdmprinter's ``machine_max_jerk_xy``, the corner speed limit CuraEngine's estimate uses
 DEFAULT_JERK = 20.0
@@ -85,12 +85,12 @@ def junction_speeds(dx, dy, feedrate, acceleration: float, jerk: float, joined) 
     if len(dx) < 2:
         return np.zeros(0)
     length = np.hypot(dx, dy)
-    unit = np.zeros((len(dx), 2))
     moving = length > 0
-    unit[moving] = np.c_[dx[moving], dy[moving]] / length[moving, None]
+    safe = np.where(moving, length, 1.0)
+    ux, uy = dx / safe, dy / safe  # unit directions (0 for a move without XY)
     v = np.maximum(np.asarray(feedrate, dtype=float) / 60.0, 1e-3)
     corner = np.minimum(v[:-1], v[1:])
-    turn = np.hypot(*(unit[1:] - unit[:-1]).T)  # |change of direction|, 0 straight on .. 2 reversing
+    turn = np.hypot(ux[1:] - ux[:-1], uy[1:] - uy[:-1])  # |change of direction|, 0 straight on .. 2 reversing
     corner = np.where(turn * corner > jerk, jerk / np.maximum(turn, 1e-12), corner)
     corner = np.minimum(corner, np.sqrt(max(float(acceleration), 1e-3) * np.minimum(length[:-1], length[1:])))
     return np.where(joined & moving[:-1] & moving[1:], corner, 0.0)
@@ -126,8 +126,19 @@ def move_seconds(dx, dy, dz, de, feedrate, acceleration: float, jerk: float = DE
     joined = extruding[:-1] & extruding[1:]
     if breaks is not None:
         joined &= ~np.asarray(breaks, dtype=bool)
+    if not joined.any():  # e.g. Cura's grid: every extrusion line alone between travels
+        return move_times(dist, feedrate, acceleration)
     corner = junction_speeds(dx, dy, feedrate, acceleration, jerk, joined)
-    return move_times(dist, feedrate, acceleration, entry=np.r_[0.0, corner], exit=np.r_[corner, 0.0])
+    return move_times(dist, feedrate, acceleration, *corner_ends(corner))
+
+
+def corner_ends(corner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Entry and exit speeds of n moves from their n - 1 corner speeds (at rest at both ends)."""
+    entry = np.zeros(len(corner) + 1)
+    exit = np.zeros(len(corner) + 1)
+    entry[1:] = corner
+    exit[:-1] = corner
+    return entry, exit
 
 
 def moves_time(dx, dy, dz, de, feedrate, acceleration: float, jerk: float = DEFAULT_JERK) -> float:

@@ -236,11 +236,18 @@ def _has_both_walls(parse: LayerParse, mesh: str) -> bool:
 
 
 def _move_seconds(moves: dict, acceleration: float, jerk: float) -> np.ndarray:
-    """Seconds of every move of a layer, shape (n,) (`estimate.move_seconds`), each FILL block timed
-    on its own: its first move starts at rest and its last one ends at rest, as the new block's."""
+    """Seconds of every FILL-block move of a layer, shape (n,) (0 for the other moves), each block
+    timed on its own (`estimate.move_seconds`): it starts and ends at rest, as the new block does."""
     block = moves["block"]
-    return move_seconds(moves["x1"] - moves["x0"], moves["y1"] - moves["y0"], moves["z1"] - moves["z0"], moves["de"],
-                        moves["f"], acceleration, jerk, breaks=block[:-1] != block[1:])
+    rows = np.flatnonzero(block >= 0)
+    seconds = np.zeros(len(block))
+    if len(rows):
+        b = block[rows]
+        breaks = (b[:-1] != b[1:]) | (rows[1:] != rows[:-1] + 1)
+        seconds[rows] = move_seconds(moves["x1"][rows] - moves["x0"][rows], moves["y1"][rows] - moves["y0"][rows],
+                                     moves["z1"][rows] - moves["z0"][rows], moves["de"][rows], moves["f"][rows],
+                                     acceleration, jerk, breaks=breaks)
+    return seconds
 
 
 def _split_empty_regions(regions: list) -> tuple[list, object, list]:

@@ -163,6 +163,15 @@ class DensityMap:
         """
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
         rho = np.full(len(xy), self.base)
+        if self.feather <= 0:
+            # Sharp borders: a region's density wherever it holds the point (later regions win).
+            # Only points inside its bounding box are tested (the rest cannot be inside).
+            x, y = xy[:, 0], xy[:, 1]
+            for poly, dens in self.regions:
+                x0, y0, x1, y1 = poly.bounds
+                near = ((x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)).nonzero()[0]
+                rho[near[contains_xy(poly, x[near], y[near])]] = dens
+            return rho
         for k, (_, dens) in enumerate(self.regions):
             w = self._weights(k, xy)
             rho = rho * (1.0 - w) + dens * w

@@ -79,6 +79,7 @@ class _ZoneMeter:
         self.zones = zones
         self.piece = piece
         self.present = [k for k, zone in enumerate(zones) if not zone.is_empty and zone.area > 0]
+        self.bounds = {k: zones[k].bounds for k in self.present}
         edges = [boundary_segments(zones[k]) for k in self.present]
         edges = np.concatenate(edges) if edges else np.zeros((0, 2, 2))
         self.edges, self.tree = edges, None
@@ -94,10 +95,12 @@ class _ZoneMeter:
             return out
         length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
         mid = 0.5 * (segments[:, 0] + segments[:, 1])
-        sure = self.tree.query(mid)[0] - 0.5 * self.piece > 0.5 * length + 1e-9
+        # Distances beyond `reach` only need to be known as "far" (inf): the tree prunes them.
+        reach = 0.5 * self.piece + 0.5 * float(length.max()) + 1e-3
+        sure = self.tree.query(mid, distance_upper_bound=reach)[0] - 0.5 * self.piece > 0.5 * length + 1e-9
         sure_idx = np.flatnonzero(sure)
         for k in self.present:
-            hit = sure_idx[contains_xy(self.zones[k], mid[sure_idx, 0], mid[sure_idx, 1])]
+            hit = sure_idx[self._contains(k, mid[sure_idx])]
             out[k, hit] = length[hit]
         unsure = np.flatnonzero(~sure)
         if unsure.size == 0:
@@ -107,7 +110,8 @@ class _ZoneMeter:
         pieces, source = _split_segments(segments[unsure], 2.0 * self.piece)
         plen = np.hypot(*(pieces[:, 1] - pieces[:, 0]).T)
         pmid = 0.5 * (pieces[:, 0] + pieces[:, 1])
-        near = self.tree.query(pmid)[0] - 0.5 * self.piece <= 0.5 * plen + 1e-9
+        reach = 0.5 * self.piece + 0.5 * float(plen.max()) + 1e-3
+        near = self.tree.query(pmid, distance_upper_bound=reach)[0] - 0.5 * self.piece <= 0.5 * plen + 1e-9
         far, close = np.flatnonzero(~near), np.flatnonzero(near)
         sub_source, sub_length, sub_mid = source[far], plen[far], pmid[far]
         if close.size:
@@ -116,9 +120,19 @@ class _ZoneMeter:
             sub_length = np.r_[sub_length, sub]
             sub_mid = np.r_[sub_mid, smid]
         for k in self.present:
-            hit = contains_xy(self.zones[k], sub_mid[:, 0], sub_mid[:, 1])
+            hit = self._contains(k, sub_mid)
             out[k, unsure] = np.bincount(sub_source[hit], sub_length[hit], unsure.size)
         return out
+
+    def _contains(self, k: int, xy: np.ndarray) -> np.ndarray:
+        """Indices of the points (m, 2) inside zone k, shape (h,) ascending.
+
+        Only points inside the zone's bounding box are tested (the rest cannot be inside).
+        """
+        x0, y0, x1, y1 = self.bounds[k]
+        x, y = xy[:, 0], xy[:, 1]
+        near = ((x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)).nonzero()[0]
+        return near[contains_xy(self.zones[k], x[near], y[near])]
 
     def inside(self, segments: np.ndarray, k: int) -> np.ndarray:
         """Length (mm) of each segment (m, 2, 2) inside zone k, shape (m,)."""

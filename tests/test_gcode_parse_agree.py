@@ -16,6 +16,8 @@ import random
 
 import numpy as np
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 from shapely.geometry import Point
 
 from DelaunayInfill import routing
@@ -49,7 +51,11 @@ def _line(rng, relative):
         for p, change in ((0.03, lambda t: t + " ;c X5"), (0.02, lambda t: t + "\r"), (0.02, lambda t: t.replace(" ", "  ", 1)),
                           (0.01, lambda t: t.replace("X", "X ", 1)), (0.01, lambda t: t + " X1"),
                           (0.01, lambda t: t.replace("G1", "G01", 1)), (0.01, lambda t: t.replace("G", "g", 1)),
-                          (0.01, lambda t: t + ".")):
+                          (0.01, lambda t: t + "."), (0.01, lambda t: t.replace("E", "E-0", 1)),
+                          (0.01, lambda t: t.replace("X1", "X\u0661", 1)),  # an Arabic-Indic 1: float() takes it
+                          (0.005, lambda t: t.replace("Y", "Y-", 1).replace("Y--", "Y-")),
+                          (0.005, lambda t: t.replace(".", "", 1) + "123456789012"),  # more digits than 15
+                          (0.005, lambda t: t.replace("Y", "Y-.", 1))):
             if rng.random() < p:
                 text = change(text)
         return text
@@ -98,6 +104,59 @@ def test_fast_and_line_parsers_agree(seed):
             _assert_same(read.parse_layer(text, state_a, model_a), read.parse_layer_lines(text, state_b, model_b))
             assert repr(model_a) == repr(model_b) and repr(state_a) == repr(state_b)
     assert fast_chunks > 20, "the fast path must be exercised"
+
+
+def _float_or_invalid(token: str):
+    """What the line-by-line parser makes of a word's value: float(), NaN when not given, None when invalid."""
+    if not token:
+        return float("nan")
+    try:
+        return float(token)
+    except ValueError:
+        return None
+
+
+def _bits(values) -> list[str]:
+    return ["nan" if v != v else float(v).hex() for v in values]  # hex keeps the sign of zero and every bit
+
+
+_TOKENS = st.text(alphabet="-.0123456789", max_size=22)
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(["", "0", "1"]), _TOKENS, _TOKENS, _TOKENS, _TOKENS, _TOKENS), max_size=12))
+@example([("1", "5.", ".5", "-.5", "-0", "007")])
+@example([("0", "-0.0", "1234567890.12345", "", "", "")])  # 15 digits: still the vectorized reader
+@example([("1", "0.1234567890123456", "9007199254740993", "", "", "1")])  # 16 digits: float()
+@example([("1", "1.2.3", "", "", "", "")])
+@example([("1", "", "-", "", "", "")])
+@example([("1", "", "", ".", "", "")])
+@example([("1", "", "", "", "-.", "")])
+@example([("1", "--1", "", "", "", "")])
+@example([("1", "1-2", "", "", "", "")])
+@example([("", "", "", "", "", "")])
+def test_word_table_reads_every_value_as_float_does(rows):
+    table = read._word_table(rows)
+    expected = [_float_or_invalid(token) for row in rows for token in row]
+    if any(v is None for v in expected):
+        assert table is None
+        return
+    assert table is not None and table.shape == (len(rows), 6) and table.dtype == np.float64
+    assert _bits(table.ravel().tolist()) == _bits(expected)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-1e6, 1e6, allow_nan=False), min_size=1, max_size=30),
+       st.sampled_from(["{:.3f}", "{:.5f}", "{:.1f}", "{:.0f}", "{:g}", "{!r}"]))
+def test_word_table_reads_cura_numbers_exactly(values, fmt):
+    tokens = [fmt.format(v) for v in values]
+    if any("e" in t for t in tokens):  # exponents are no G-code
+        return
+    rows = [("1", t, t, "", "", t) for t in tokens]
+    expected = [float(t) for t in tokens]
+    table = read._word_table(rows)
+    assert _bits(table[:, 1].tolist()) == _bits(expected) and _bits(table[:, 5].tolist()) == _bits(expected)
+    assert np.isnan(table[:, 3]).all()
 
 
 def test_clip_segments_same_with_and_without_kd_trees(monkeypatch):

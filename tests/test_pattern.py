@@ -296,3 +296,25 @@ def test_single_zone_scaling_keeps_a_delaunay_pattern_covering_the_footprint(reg
     assert pattern.quality()["lop_violations"] == 0
     covered = unary_union([Polygon(pattern.points[t]) for t in pattern.triangles])
     assert region.difference(covered).area <= 1e-9 * region.area
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_density_at_sharp_borders_is_the_last_region_holding_the_point(seed):
+    """DensityMap.at without feathering: each point gets the density of the last region whose
+    interior holds it (base elsewhere), checked point by point with shapely."""
+    from DelaunayInfill.density import DensityMap
+
+    rng = np.random.default_rng(seed)
+    regions = [(p, d) for (p, _), d in zip(star_regions(), rng.uniform(0.05, 0.9, 6))]
+    regions.append((box(-8, -8, 8, 8).difference(Point(0, 0).buffer(3)), 0.6))  # a hole
+    regions.append((unary_union([box(20, -40, 40, -20), box(-60, 30, -50, 60)]), 0.7))  # partly outside
+    dmap = DensityMap.create(0.2, regions)
+    xy = np.r_[rng.uniform(-45, 45, (3000, 2)), np.asarray(star().exterior.coords)]
+    want = np.full(len(xy), 0.2)
+    for poly, dens in regions:
+        for i, (x, y) in enumerate(xy):
+            if poly.contains(Point(x, y)):
+                want[i] = dens
+    got = dmap.at(xy)
+    assert np.array_equal(got, want)
+    assert len(set(got.tolist())) == len(regions) + 1  # every region holds some point

@@ -18,7 +18,7 @@ import math
 import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from itertools import compress
+from itertools import chain
 
 import numpy as np
 
@@ -519,9 +519,10 @@ def parse_layer_lines(text: str, state: MachineState, retraction: RetractionMode
 
 
 # ----------------------------------------------------------------------------- fast path
-# Digits, "." and "-" (faster than -?\d*\.?\d+); float() refuses the odd ones ("1.2.3", "-", "1-2"),
-# and those it takes are read as the line parser reads them ("5." is 5 for both).
-_NUMBER = r"([-.\d]+)"
+# ASCII digits, "." and "-" (faster than -?\d*\.?\d+); `_decimal_values` refuses the odd ones ("1.2.3",
+# "-", "1-2") as float() does, and reads those it takes as the line parser reads them ("5." is 5 for both).
+# Other digits (float() takes Unicode ones) leave the line to the line-by-line branch of pass A.
+_NUMBER = r"([-.0-9]+)"
 # One match per line: Cura's motion lines ("G1 F.. X.. Y.. Z.. E..", each word optional, in this
 # order, single spaces) with their values; any other line matches the last branch with empty groups.
 _CURA_LINE = re.compile(
@@ -532,6 +533,92 @@ _CURA_LINE = re.compile(
 _WORD_COLUMN = {"F": 0, "X": 1, "Y": 2, "Z": 3, "E": 4}
 _NAN = float("nan")
 _COLUMNS = np.arange(5)
+_GROUPS = 6  # the regex's groups: G code, F, X, Y, Z, E
+# A token of at most this many digits is an integer below 2**53, exact in float64, and 10**k (k <= 15)
+# is exact too: their quotient is then correctly rounded, the value float() gives the same text.
+_MAX_DIGITS = 15
+_POWERS_OF_TEN = 10.0 ** np.arange(_MAX_DIGITS + 1)
+_COMMA, _MINUS, _DOT, _ZERO = (ord(c) for c in ",-.0")
+
+
+class _TooLong(Exception):
+    """A number with more digits than `_decimal_values` reads exactly."""
+
+
+def _decimal_values(joined: str, count: int) -> np.ndarray | None:
+    """Read `count` comma-separated tokens of ``[-.0-9]*``, all at once.
+
+    Parameters
+    ----------
+    joined : str
+        The tokens joined with ``","``; an empty token is a word not given.
+    count : int
+        Number of tokens (commas + 1).
+
+    Returns
+    -------
+    numpy.ndarray or None
+        Shape (count,) float64: the value ``float(token)`` gives, NaN for an
+        empty token; None when a token is no number (``float`` would raise).
+
+    Raises
+    ------
+    _TooLong
+        A token has more than `_MAX_DIGITS` digits (read it with ``float``).
+    """
+    chars = np.frombuffer(joined.encode("ascii"), dtype=np.uint8)
+    is_comma = chars == _COMMA
+    is_digit = chars >= _ZERO  # the alphabet is "-.,0-9": only digits are >= "0"
+    digits_through = is_digit.cumsum()  # digits up to and including each char
+    # digits before token t: bounds[t]; up to its end: bounds[t + 1]
+    bounds = np.empty(count + 1, dtype=digits_through.dtype)
+    bounds[0] = 0
+    bounds[1:-1] = digits_through[is_comma]
+    bounds[-1] = digits_through[-1]
+    token_end = bounds[1:]
+    n_digits = token_end - bounds[:-1]
+    if n_digits.max() > _MAX_DIGITS:
+        raise _TooLong
+    token_of = is_comma.cumsum()  # token index of each char (a comma opens the next token)
+    where = is_digit.nonzero()[0]
+    token = token_of[where]
+    after = token_end[token] - digits_through[where]  # digits after this one in its token
+    values = np.bincount(token, weights=_POWERS_OF_TEN[after] * (chars[where] - _ZERO), minlength=count)
+    values = values.astype(np.float64, copy=False)  # bincount of nothing is int64
+    dots = (chars == _DOT).nonzero()[0]
+    if len(dots):
+        dot_token = token_of[dots]
+        if (dot_token[1:] == dot_token[:-1]).any():
+            return None  # two points in one number
+        values[dot_token] /= _POWERS_OF_TEN[token_end[dot_token] - digits_through[dots]]
+    minus = (chars == _MINUS).nonzero()[0]
+    if len(minus):
+        if not is_comma[minus[minus > 0] - 1].all():
+            return None  # a minus inside a number ("1-2", "--1")
+        values[token_of[minus]] *= -1.0  # -0 stays a signed zero, as float("-0") gives
+    empty = n_digits == 0
+    if empty.any():
+        if len(dots) and empty[token_of[dots]].any() or len(minus) and empty[token_of[minus]].any():
+            return None  # "-", ".", "-.": no digits
+        values[empty] = _NAN
+    return values
+
+
+def _word_table(matches: list[tuple[str, ...]]) -> np.ndarray | None:
+    """The regex groups of every line as numbers, shape (lines, 6): G code, F, X, Y, Z, E; NaN not given.
+
+    None when a word's value is no number.
+    """
+    if not matches:
+        return np.zeros((0, _GROUPS))
+    try:
+        values = _decimal_values(",".join(chain.from_iterable(matches)), _GROUPS * len(matches))
+    except _TooLong:
+        try:
+            values = np.array([float(v) if v else _NAN for match in matches for v in match], dtype=np.float64)
+        except ValueError:
+            return None
+    return None if values is None else values.reshape(-1, _GROUPS)
 
 
 def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionModel) -> LayerParse | None:
@@ -547,6 +634,9 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
     position_known = math.isfinite(state.x) and math.isfinite(state.y)  # else the first moves start nowhere
     matches = _CURA_LINE.findall(text)
     if len(matches) != n_lines:
+        return None
+    words = _word_table(matches)
+    if words is None:
         return None
     relative_e = state.relative_e
     # ---- pass A: the non-motion lines, in order (comments, commands, unusual motion lines)
@@ -564,10 +654,8 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
     # attributes of the moves after each processed line: (line, kind, mesh, block, extruder)
     marks = [(-1, kind, cur_mesh, -1, extruder)]
     extra_rows: list[tuple] = []  # other G0/G1 lines and G92 E (line, F, X, Y, Z, E, is_g0, is_g92)
-
-    def open_block(i):
-        return {"start": i, "mesh": mesh, "extruder": extruder, "fw_before": fw, "type": type_name,
-                "unsupported": "", "extra_lines": [], "index": len(blocks)}
+    code_of_line = words[:, 0]  # 0 or 1 for Cura's motion lines, NaN for any other line
+    is_motion = code_of_line == code_of_line
 
     def close_block(i):
         nonlocal current
@@ -580,12 +668,10 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
             blocks.append(current)
             current = None
 
-    codes = [match[0] for match in matches]  # "0", "1" (Cura's motion lines) or "" (any other line)
-    motion_rows = list(compress(matches, codes))
-    motion_codes = list(compress(codes, codes))
-    g0_rows = [k for k, code in enumerate(motion_codes) if code == "0"]  # travels teach the travel speed
-    for i in [i for i, code in enumerate(codes) if not code and lines[i]]:
+    for i in (~is_motion).nonzero()[0].tolist():
         line = lines[i]
+        if not line:
+            continue
         c = line[0]
         if c == ";":
             if line.startswith(";TYPE:"):
@@ -593,7 +679,8 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
                 type_name = line[6:].strip()
                 kind = TYPE_CODES.get(type_name, 0)
                 if kind == FILL and mesh != "NONMESH":
-                    current = open_block(i)
+                    current = {"start": i, "mesh": mesh, "extruder": extruder, "fw_before": fw, "type": type_name,
+                               "unsupported": "", "extra_lines": []}
             elif line.startswith(";MESH:"):
                 close_block(i)
                 mesh = line[6:].strip()
@@ -602,7 +689,8 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
                     meshes.append(mesh)
                 cur_mesh = mesh_index[mesh]
                 if kind == FILL and mesh != "NONMESH":
-                    current = open_block(i)
+                    current = {"start": i, "mesh": mesh, "extruder": extruder, "fw_before": fw, "type": type_name,
+                               "unsupported": "", "extra_lines": []}
             elif line.startswith(";LAYER:"):
                 close_block(i)
                 try:
@@ -663,26 +751,24 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
     close_block(n_lines)
 
     # ---- pass B: every move at once
-    n_motion = len(motion_rows)
-    line_of = list(compress(range(n_lines), codes)) if n_motion else []
-    try:
-        flat = [float(v) if v else _NAN for match in motion_rows for v in match[1:]]
-    except ValueError:
-        return None
+    motion_lines = is_motion.nonzero()[0]
+    # row 0: the state before the chunk; row r + 1: the words of move r (NaN: not given)
+    table = np.empty((len(motion_lines) + 1, 5), dtype=np.float64)
+    table[0] = state.f, state.x, state.y, state.z, state.e
+    table[1:] = words[motion_lines, 1:]
+    is_g0 = code_of_line[motion_lines] == 0.0  # travels teach the travel speed
+    line_of = motion_lines.tolist()
     is_g92 = None  # rows that are G92 E (they set the E register, they are no moves)
     if extra_rows:
-        is_g0 = [code == "0" for code in motion_codes]
-        rows = sorted([*zip(line_of, [flat[5 * k : 5 * k + 5] for k in range(n_motion)], is_g0, [False] * n_motion),
+        rows = sorted([*zip(line_of, table[1:].tolist(), is_g0.tolist(), [False] * len(line_of)),
                        *((r[0], list(r[1:6]), r[6], r[7]) for r in extra_rows)], key=lambda r: r[0])
         line_of = [r[0] for r in rows]
-        flat = [v for r in rows for v in r[1]]
-        g0_rows = [k for k, r in enumerate(rows) if r[2]]
+        table = np.array([table[0].tolist(), *(r[1] for r in rows)], dtype=np.float64)
+        is_g0 = np.array([r[2] for r in rows], dtype=bool)
         is_g92 = np.array([r[3] for r in rows], dtype=bool)
         if not is_g92.any():
             is_g92 = None
     n = len(line_of)
-    # row 0: the state before the chunk; row r + 1: the words of move r (NaN: not given)
-    table = np.array([state.f, state.x, state.y, state.z, state.e, *flat], dtype=np.float64).reshape(n + 1, 5)
     given = table == table
     idx = np.where(given, np.arange(n + 1)[:, None], 0)
     np.maximum.accumulate(idx, axis=0, out=idx)
@@ -719,8 +805,9 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
 
     # ---- pass C: retraction depth and what the retraction model learns (few moves)
     learn_rows = bisect.bisect_left(line_of, learn_until)  # rows before the first ;TIME_ELAPSED:
-    e_only = np.flatnonzero(e_move & ~moved).tolist()  # retractions and primes
-    extruding_rows = np.flatnonzero(moved & (de > 0)).tolist()  # each one resets the depth
+    e_only = (e_move & ~moved).nonzero()[0].tolist()  # retractions and primes
+    extruding_all = moved & (de > 0)
+    extruding_rows = extruding_all.nonzero()[0].tolist()  # each one resets the depth
     e_only_de = de[e_only].tolist()
     retract_update = prime_update = hop_update = travel_update = None
     retract_rows: list[int] = []
@@ -733,17 +820,15 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
             prime_update = f1[r].item()
     hop = ~moved & (z1 > z0)
     if hop.any():
-        for r in np.flatnonzero(hop[:learn_rows] & ~e_move[:learn_rows])[::-1].tolist():
+        for r in (hop[:learn_rows] & ~e_move[:learn_rows]).nonzero()[0][::-1].tolist():
             k = bisect.bisect_left(retract_rows, r) - 1  # the last retraction before it
             if line_of[r] - (line_of[retract_rows[k]] if k >= 0 else -10) <= 2:
                 hop_update = (z1[r].item() - z0[r].item(), f1[r].item())
                 break
-    if g0_rows and learn_rows:
-        travels = moved & ~e_move
-        for r in reversed(g0_rows):
-            if r < learn_rows and travels[r]:
-                travel_update = f1[r].item()
-                break
+    if learn_rows:
+        travels = (is_g0[:learn_rows] & moved[:learn_rows] & ~e_move[:learn_rows]).nonzero()[0]
+        if len(travels):
+            travel_update = f1[travels[-1]].item()
 
     def depth_before(row: int) -> float:
         """Retraction depth before move `row` (after all moves before it)."""
@@ -795,25 +880,39 @@ def _parse_layer_fast(text: str, state: MachineState, retraction: RetractionMode
         setattr(state, name, getattr(end, name))
 
     # kind, mesh, block and extruder of each move: those after the last pass-A mark before it
-    attrs = np.array([m[1:] for m in marks], dtype=np.int64)
-    move_lines_arr = np.array(move_lines, dtype=np.int64)
-    row_attrs = attrs[np.searchsorted(np.array([m[0] for m in marks]), move_lines_arr) - 1].T.copy()
+    attrs = np.array(marks, dtype=np.int64)
+    # (the motion lines found by the regex, when no other line made a move)
+    move_lines_arr = motion_lines.astype(np.int64) if move_lines is line_of and not extra_rows else np.array(
+        move_lines, dtype=np.int64)
+    row_attrs = attrs[attrs[:, 0].searchsorted(move_lines_arr) - 1, 1:].T.copy()
+    # one copy: each column a contiguous row of its own (no two share memory)
+    columns = np.empty((8, n))
+    columns[0:3] = before[:, 1:4].T
+    columns[3:6] = after[:, 1:4].T
+    columns[6] = de
+    columns[7] = f1
+    if is_g92 is not None:
+        columns = columns[:, real]
     moves = {
         "line": move_lines_arr,
-        "x0": x0[real].copy(), "y0": y0[real].copy(), "z0": z0[real].copy(),
-        "x1": x1[real].copy(), "y1": y1[real].copy(), "z1": z1[real].copy(),
-        "de": de[real].copy(), "f": f1[real].copy(),
+        "x0": columns[0], "y0": columns[1], "z0": columns[2],
+        "x1": columns[3], "y1": columns[4], "z1": columns[5],
+        "de": columns[6], "f": columns[7],
         "kind": row_attrs[0], "mesh": row_attrs[1], "block": row_attrs[2], "ext": row_attrs[3],
     }
-    if not position_known:
+    if position_known:
+        if is_g92 is not None:
+            moved, extruding_all = moved[real], extruding_all[real]
+        extruding = extruding_all
+    else:
         # A move from an unknown position (nothing before it set X/Y) is no segment: start it where it ends.
         for a, b in (("x0", "x1"), ("y0", "y1")):
             unknown = ~np.isfinite(moves[a])
             if unknown.any():
                 moves[a][unknown] = moves[b][unknown]
-    moved = (moves["x1"] != moves["x0"]) | (moves["y1"] != moves["y0"])
-    extruding = (moves["de"] > 0) & moved
-    first = np.flatnonzero(extruding)[:1]
+        moved = (moves["x1"] != moves["x0"]) | (moves["y1"] != moves["y0"])
+        extruding = (moves["de"] > 0) & moved
+    first = extruding.nonzero()[0][:1]
     layer_z = float(moves["z1"][first[0]]) if len(first) else start_z
     parse = LayerParse(lines, number, layer_z, moves, meshes, fill_blocks, state.copy(), time_lines)
     parse._remember("moved", moved)

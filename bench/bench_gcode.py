@@ -19,8 +19,9 @@ For every model this script
 Print time is given twice: the figure the file itself reports (the last
 ``;TIME_ELAPSED``: CuraEngine's estimate, updated by the pipeline for the new
 infill), and this script's own estimate with one motion model for every file
-(trapezoid per move, 3000 mm/s^2, junction speed 0), so the four patterns
-are compared like for like.
+(its own parser; trapezoids at 3000 mm/s^2 with jerk-limited corners between
+extrusion moves, the pipeline's model, see bench_estimate.py), so the four
+patterns are compared like for like.
 
 With ``--stages`` a third table splits one more ``process_gcode`` run (not
 the timed ones) into its stages: parsing, infill areas, pattern lookups and
@@ -30,6 +31,7 @@ line ends, sharing the route among Cura's FILL blocks, G-code writing, the rest.
 Usage::
 
     python3 bench/bench_gcode.py [--density PCT] [--models cube,hbracket,star,star_regions] [--out DIR] [--stages]
+                                 [--height MM]   # every model that tall (more layers)
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ import time
 import numpy as np
 
 from DelaunayInfill import curaengine, models
+from DelaunayInfill.gcode.estimate import DEFAULT_JERK, move_seconds
 
 PATTERNS = ("grid", "triangles", "lines")
 _MOVE = re.compile(r"^(G[01])\b([^;\n]*)", re.M)
@@ -63,11 +66,19 @@ STAGES = (
 )
 
 
-def _model_files(folder: str) -> dict[str, list]:
-    """name -> [(stl path, per-mesh settings)], written into `folder`."""
+def _model_files(folder: str, height: float | None = None) -> dict[str, list]:
+    """name -> [(stl path, per-mesh settings)], written into `folder`.
+
+    `height` (mm) makes every model that tall (default: the test models, 10 mm, the cube 20 mm): the
+    pipeline's one-off work (pattern build, modifier shapes) weighs less over more layers.
+    """
     paths = models.write_test_models(folder)
+    if height is not None:
+        for name, tris in (("cube", models.box(20.0, 20.0, height)), ("hbracket", models.h_bracket(height=height)),
+                           ("star", models.star(height=height))):
+            models.write_stl(paths[name], tris, name=name)
     regions = []
-    for name, tris in models.star_region_prisms(height=10.0, margin=1.0).items():
+    for name, tris in models.star_region_prisms(height=height or 10.0, margin=1.0).items():
         path = os.path.join(folder, f"region_{name}.stl")
         models.write_stl(path, tris, name=name)
         percent = 100 * models.STAR_FIGURE10_DENSITIES[name]
@@ -122,10 +133,9 @@ def gcode_stats(text: str) -> dict:
         x, y, z = nx, ny, nz
     a = np.array(rows, dtype=float)
     dxy = np.hypot(a[:, 0], a[:, 1])
-    dist = np.where(dxy > 0, np.hypot(dxy, a[:, 2]), np.abs(np.where(a[:, 2] != 0, a[:, 2], a[:, 3])))
-    v = np.maximum(a[:, 4] / 60.0, 1e-3)
-    full = dist >= v * v / ACCELERATION
-    seconds = np.where(full, dist / v + v / ACCELERATION, 2.0 * np.sqrt(dist / ACCELERATION)).sum()
+    # the G-code pass's motion model (trapezoids, jerk-limited corners between extrusion moves; checked
+    # against CuraEngine's own estimate by bench_estimate.py), the same for every file
+    seconds = move_seconds(a[:, 0], a[:, 1], a[:, 2], a[:, 3], a[:, 4], ACCELERATION, DEFAULT_JERK).sum()
     in_fill = a[:, 5] == 1
     travel = in_fill & (a[:, 3] <= 0) & (dxy > 0)
     retract = in_fill & (dxy == 0) & (a[:, 3] < 0)
@@ -181,10 +191,11 @@ def stage_times(chunks: list[str]) -> dict[str, float]:
     return {**spent, "total": total, "other": total - sum(spent.values())}
 
 
-def run(model_names: list[str], density: float, out: str, repeats: int = 3, stages: bool = False) -> tuple[list, list, list]:
+def run(model_names: list[str], density: float, out: str, repeats: int = 3, stages: bool = False,
+        height: float | None = None) -> tuple[list, list, list]:
     from DelaunayInfill import process_gcode
 
-    files = _model_files(os.path.join(out, "models"))
+    files = _model_files(os.path.join(out, "models"), height)
     speed_rows, output_rows, stage_rows = [], [], []
     for name in model_names:
         meshes = files[name]
@@ -283,6 +294,8 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", default=None, help="keep the G-code files in this folder")
     parser.add_argument("--stages", action="store_true", help="also time the pipeline's stages (one extra run)")
+    parser.add_argument("--height", type=float, default=None,
+                        help="make every model this tall, mm (default: the test models, 10 mm; the cube 20 mm)")
     args = parser.parse_args(argv)
     try:
         curaengine.find_curaengine()
@@ -294,7 +307,9 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or tmp
         os.makedirs(out, exist_ok=True)
-        speed, output, stage_rows = run(names, args.density, out, args.repeats, args.stages)
+        speed, output, stage_rows = run(names, args.density, out, args.repeats, args.stages, args.height)
+    if args.height is not None:
+        print(f"Every model {args.height:g} mm tall.")
     print(format_tables(speed, output, args.density, stage_rows))
     return 0
 

@@ -77,7 +77,8 @@ run_pytest unit-oldest-shapely20 oldest-shapely20 "${UNIT[@]}"
 
 if [ "$WHAT" = all ]; then
   need_apt cura-engine cura xvfb xauth imagemagick python3-zeroconf python3-pip iproute2 || FAILED_STEPS+=("apt-get install")
-  run_pytest engine current tests/engine
+  # tests/engine and the real-CuraEngine tests beside the unit tests (marked engine, left out above)
+  run_pytest engine current tests -m engine --ignore=tests/gui
   run_pytest gui current tests/gui
 fi
 

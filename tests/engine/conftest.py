@@ -20,6 +20,16 @@ from DelaunayInfill import curaengine, models
 
 from .cases import Case, matrix
 
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def pytest_collection_modifyitems(items):
+    # every test of this folder belongs to the engine tier (`-m engine` selects them with the real
+    # CuraEngine tests that live beside the unit tests)
+    for item in items:
+        if os.path.dirname(os.path.abspath(str(item.fspath))) == HERE:
+            item.add_marker(pytest.mark.engine)
+
 
 def ensure_engine() -> str:
     """Make sure CuraEngine and Cura's definitions are present; install them with apt when root.

@@ -337,7 +337,7 @@ def test_new_block_entered_retracted_never_runs_e_backwards():
     after = MachineState(x=30.0, y=0.0, z=0.2, e=112.0, f=9000.0, depth=5.0)
     params = EmitParams(e_per_mm=0.05, print_f=3000.0, travel_f=9000.0,
                         retraction=RetractionModel(amount=5.0, retract_f=2700.0, prime_f=2700.0, seen=True),
-                        part=None, min_travel=0.8, step=0.2, layer_z=0.2)
+                        part=None, min_travel=0.8, layer_z=0.2)
     paths = [np.array([[1.0, 1.0], [11.0, 1.0], [11.0, 11.0]]), np.array([[20.0, 1.0], [30.0, 1.0]])]
     out = emit_block(paths, before, after, params)
     e = before.e

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..combing import segments_inside
-from .estimate import DEFAULT_JERK, corner_ends, junction_speeds, move_times
+from .estimate import DEFAULT_JERK, move_seconds
 from .read import MachineState, RetractionModel
 
 __all__ = ["EmitParams", "EmitResult", "emit_block", "fmt"]
@@ -45,7 +45,6 @@ class EmitParams:
     retraction: RetractionModel
     part: object = None
     min_travel: float = 0.8
-    step: float = 0.2
     layer_z: float | None = None
     xy_words: dict | None = None  # cache: id(path) -> (path, its "G1 X.. Y.." words); paths repeat layer after layer
     # a travel that would leave `part` goes round inside it instead (a combing.CombingArea of the
@@ -76,14 +75,6 @@ class EmitResult:
     seconds: float = 0.0
     dist: list[np.ndarray] = field(default_factory=list)
     feed: list[np.ndarray] = field(default_factory=list)
-
-
-def _travels_inside(starts: np.ndarray, ends: np.ndarray, part, step: float) -> np.ndarray:
-    """Whether each straight travel stays inside `part` (exactly: clipped length equals length).
-
-    `step` is kept for the callers' signature; the test no longer samples.
-    """
-    return segments_inside(starts, ends, part)
 
 
 def _xy_words(paths: list[np.ndarray], cache: dict | None) -> list[str]:
@@ -148,7 +139,7 @@ class _Template:
         self.xy = _xy_words(paths, params.xy_words)
         # every travel of the block in one test: from `start` to the first path, between the
         # paths, from the last path to `end`; the first and last also go to the single-travel memo
-        free = _travels_inside(np.vstack([[start], self.tails_arr]), np.vstack([self.heads_arr, [end]]), part, params.step)
+        free = segments_inside(np.vstack([[start], self.tails_arr]), np.vstack([self.heads_arr, [end]]), part)
         self.inner_free = free[1:-1]
         (hx, hy), (tx, ty) = self.heads[0], self.tails[-1]
         _remember_travel(start[0], start[1], hx, hy, params, bool(free[0]))
@@ -158,9 +149,9 @@ class _Template:
         """Estimated time of all extrusion moves at `print_f` (mm/min), corners included."""
         key = (print_f, acceleration, jerk)
         if self._seconds is None or self._seconds[0] != key:
-            feed = np.full(len(self.seg_len), float(print_f))
-            corner = junction_speeds(self.seg_dxy[:, 0], self.seg_dxy[:, 1], feed, acceleration, jerk, self.seg_joined)
-            seconds = move_times(self.seg_len, feed, acceleration, *corner_ends(corner))
+            n = len(self.seg_len)
+            seconds = move_seconds(self.seg_dxy[:, 0], self.seg_dxy[:, 1], np.zeros(n), self.seg_len, np.full(n, float(print_f)),
+                                   acceleration, jerk, breaks=~self.seg_joined)
             self._seconds = (key, float(seconds.sum()))
         return self._seconds[1]
 
@@ -198,12 +189,12 @@ def _remember_travel(x0: float, y0: float, x1: float, y1: float, params: EmitPar
 
 
 def _travel_free(x0: float, y0: float, x1: float, y1: float, params: EmitParams) -> bool:
-    """`_travels_inside` for one travel, remembered by its exact end points (they repeat on prisms)."""
+    """`segments_inside` for one travel, remembered by its exact end points (they repeat on prisms)."""
     if params.xy_words is not None:
         hit = params.xy_words.setdefault(("single travels",), {}).get((id(params.part), x0, y0, x1, y1))
         if hit is not None and hit[0] is params.part:
             return hit[1]
-    free = bool(_travels_inside(np.array([[x0, y0]]), np.array([[x1, y1]]), params.part, params.step)[0])
+    free = bool(segments_inside(np.array([[x0, y0]]), np.array([[x1, y1]]), params.part)[0])
     _remember_travel(x0, y0, x1, y1, params, free)
     return free
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DEFAULT_JERK", "corner_ends", "junction_speeds", "move_seconds", "move_times", "moves_time"]
+__all__ = ["DEFAULT_JERK", "junction_speeds", "move_seconds", "move_times", "moves_time"]
 
 #: mm/s: fdmprinter's ``machine_max_jerk_xy``, the corner speed limit CuraEngine's estimate uses
 DEFAULT_JERK = 20.0
@@ -129,10 +129,10 @@ def move_seconds(dx, dy, dz, de, feedrate, acceleration: float, jerk: float = DE
     if not joined.any():  # e.g. Cura's grid: every extrusion line alone between travels
         return move_times(dist, feedrate, acceleration)
     corner = junction_speeds(dx, dy, feedrate, acceleration, jerk, joined)
-    return move_times(dist, feedrate, acceleration, *corner_ends(corner))
+    return move_times(dist, feedrate, acceleration, *_corner_ends(corner))
 
 
-def corner_ends(corner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _corner_ends(corner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Entry and exit speeds of n moves from their n - 1 corner speeds (at rest at both ends)."""
     entry = np.zeros(len(corner) + 1)
     exit = np.zeros(len(corner) + 1)

@@ -663,7 +663,6 @@ class _Run:
                     retraction=retraction,
                     part=travel_part,
                     min_travel=s.retraction_min_travel if s.retraction_min_travel is not None else 2 * lw,
-                    step=max(lw / 2, 0.1),
                     layer_z=parse.z,
                     xy_words=self.xy_words,
                     comb=self._combing_area(travel_part, lw) if s.combing else None,

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry import empty_area, polygons_of, to_multipolygon
+from .estimate import DEFAULT_JERK
 
 __all__ = ["MeshSettings", "ProcessSettings", "Region", "RegionReport", "ProcessReport"]
 
@@ -58,7 +59,7 @@ class ProcessSettings:
     firmware_retraction: bool | None = None
     travel_speed: float | None = None
     acceleration: float = 3000.0
-    jerk: float = 20.0  # mm/s, XY corner speed limit of the time estimate (Cura's machine_max_jerk_xy)
+    jerk: float = DEFAULT_JERK  # mm/s, XY corner speed limit of the time estimate (Cura's machine_max_jerk_xy)
     feather: float = 0.0
 
     def validate(self) -> None:

@@ -43,6 +43,7 @@ from .read import (
     iter_file_chunks,
     parse_layer,
 )
+from .replay import LayerRecord, LayerWords, RepeatCache, layer_words, record_layer, replay_layer
 from .settings import MeshSettings, ProcessReport, ProcessSettings, Region, RegionReport
 
 __all__ = [
@@ -59,7 +60,10 @@ __all__ = [
 _TIME_ELAPSED = re.compile(r"^;TIME_ELAPSED:(-?[\d.]+)", re.M)
 _M204 = re.compile(r"^M204 [^\n;]*?S(\d+\.?\d*)", re.M)
 _DEFAULT_LINE_WIDTH = 0.4
-_RETRACT_TRAVEL_MM = 40.0  # a retraction and prime take about as long as this much travel
+_RETRACT_TRAVEL_MM = 40.0
+# the report's counters that a repeated layer adds to again (`_Run._totals`)
+_COUNTED = ("layers_total", "layers_processed", "layers_kept", "infill_before_mm", "infill_after_mm",
+            "infill_travel_mm", "infill_retractions", "blocks_replaced", "blocks_kept")  # a retraction and prime take about as long as this much travel
 
 
 # ----------------------------------------------------------------------------- survey
@@ -328,6 +332,7 @@ class _Run:
         self.time_delta = 0.0
         self.acceleration = survey.acceleration or settings.acceleration
         self.prev_z: float | None = None
+        self.repeats = RepeatCache() if settings.repeat_layers else None
         self.lw_warned = False
         self.any_lw: float | None = None
 
@@ -388,6 +393,16 @@ class _Run:
 
     # ------------------------------------------------------------------ per chunk
     def process_chunk(self, text: str) -> str:
+        words = layer_words(text) if self.repeats is not None and text.startswith(";LAYER:") else None
+        repeat_key = None
+        if words is not None:
+            repeat_key = self._repeat_key(words)
+            record = self.repeats.get(repeat_key)
+            if record is not None:
+                out = self._replay(text, words, record)
+                if out is not None:
+                    return out
+            state_before, totals_before = self.state.copy(), self._totals()
         parse = parse_layer(text, self.state, self.retraction)
         m = parse.moves
         # Net E per extruder (retractions and primes included): what Cura's filament figure counts.
@@ -406,6 +421,8 @@ class _Run:
         lines = parse.lines
         time_lines = parse.time_elapsed_lines
         changed = False
+        failed = False
+        edits: list = []
         if parse.number is not None:
             self.report.layers_total += 1
             todo = [b for b in parse.blocks if b.has_moves and self.s.enabled(b.mesh)]
@@ -417,6 +434,7 @@ class _Run:
                 except ProcessCancelled:
                     raise
                 except Exception as exc:  # a failing layer keeps Cura's infill
+                    failed = True
                     self.report.failed_layers.append(parse.number)
                     self.report.failure_messages.append(f"layer {parse.number}: {type(exc).__name__}: {exc}")
                 else:
@@ -426,10 +444,12 @@ class _Run:
                         self.report.layers_kept += 1
                     else:
                         self.report.layers_processed += 1
-                        lines, time_lines = new_lines
+                        lines, time_lines, edits = new_lines
                         changed = True
                         self.time_delta += dt
             self.prev_z = parse.z
+        if words is not None and parse.number is not None and not failed:
+            self._record(repeat_key, text, words, parse, state_before, totals_before, edits, changed)
         if time_lines and self.time_delta != 0.0:
             if not changed:
                 lines = list(lines)
@@ -438,6 +458,77 @@ class _Run:
                 lines[i] = f";TIME_ELAPSED:{old + self.time_delta:.6f}"
             changed = True
         return "\n".join(lines) if changed else text
+
+    # ------------------------------------------------------------------ repeated layers (replay.py)
+    def _repeat_key(self, words: LayerWords) -> tuple:
+        """What a layer's result depends on: its text (but Z and E numbers) and what this run remembers."""
+        st = self.state
+        return (
+            words.key,
+            (st.x, st.y, st.f, st.depth, st.fw_retracted, st.extruder, st.type, st.mesh, st.relative_e,
+             st.relative_xyz, st.e_mode_relative),
+            tuple(vars(self.retraction).values()),
+            (tuple(self.mesh_lw.items()), self.any_lw, tuple(self.mesh_density.items()),
+             tuple(self.region_density.items()), tuple(self.reach_density.items()), tuple(self.cura_density.items())),
+        )
+
+    def _totals(self) -> tuple:
+        """The report's running totals (what a layer adds to them is what its repeats add again)."""
+        r = self.report
+        return (tuple(getattr(r, name) for name in _COUNTED), dict(self.e_before), dict(self.e_delta),
+                {name: (t.target, t.length, t.area) for name, t in self.tally.items()}, self.time_delta)
+
+    def _region_sections(self, z: float) -> list:
+        z_slice = self._slice_z(z)
+        return [r.at(z_slice).wkb for r in self.user_regions]
+
+    def _record(self, key, text, words, parse: LayerParse, state_before: MachineState, totals_before: tuple,
+                edits: list, changed: bool) -> None:
+        record = record_layer(text, words, parse.lines, state_before, parse.end_state, parse.z, edits,
+                              parse.time_elapsed_lines, changed, RetractionModel(**vars(self.retraction)))
+        if record is None:
+            return
+        counted0, e_before0, e_delta0, tally0, time0 = totals_before
+        counted1, e_before1, e_delta1, tally1, time1 = self._totals()
+        record.extra["added"] = (
+            tuple(b - a for a, b in zip(counted0, counted1, strict=True)),
+            {k: v - e_before0.get(k, 0.0) for k, v in e_before1.items()},
+            {k: v - e_delta0.get(k, 0.0) for k, v in e_delta1.items()},
+            {k: (t, length - tally0.get(k, (t, 0.0, 0.0))[1], area - tally0.get(k, (t, 0.0, 0.0))[2])
+             for k, (t, length, area) in tally1.items()},
+            time1 - time0,
+        )
+        if self.user_regions:
+            record.extra["regions"] = self._region_sections(parse.z)
+        self.repeats.put(key, record)
+
+    def _replay(self, text: str, words: LayerWords, record: LayerRecord) -> str | None:
+        """`text` written from the record of the layer it repeats; None when it does not repeat it after all."""
+        added = record.extra["added"]
+        if self.user_regions:
+            layer_z = round(record.layer_z + (self.state.z - record.z_start), 6)
+            if self._region_sections(layer_z) != record.extra["regions"]:
+                return None
+        done = replay_layer(text, words, record, self.state, self.time_delta + added[4])
+        if done is None:
+            return None
+        out, self.state, self.prev_z = done
+        counted, e_before, e_delta, tally, dt = added
+        r = self.report
+        for name, value in zip(_COUNTED, counted, strict=True):
+            if value:
+                setattr(r, name, getattr(r, name) + value)
+        for k, v in e_before.items():
+            self.e_before[k] = self.e_before.get(k, 0.0) + v
+        for k, v in e_delta.items():
+            self.e_delta[k] = self.e_delta.get(k, 0.0) + v
+        for name, (target, length, area) in tally.items():
+            self._tally(name, target, length, area)
+        self.time_delta += dt
+        vars(self.retraction).update(vars(record.retraction_after))
+        if not record.blocks and not (record.time_lines and self.time_delta != 0.0):
+            return text
+        return out
 
     def _slice_z(self, z: float) -> float:
         h = None
@@ -693,18 +784,20 @@ class _Run:
         out_lines: list[str] = []
         pos = 0
         shifts = []  # (stop, lines added) of each replaced block
+        edits = []  # (start, stop, new lines, state before, state after) of each replaced block
         for bi in sorted(replaced, key=lambda i: blocks[i].start):
             blk = blocks[bi]
             out_lines.extend(lines[pos : blk.start + 1])
             out_lines.extend(replaced[bi])
             pos = blk.stop
             shifts.append((blk.stop, len(replaced[bi]) - (blk.stop - blk.start - 1)))
+            edits.append((blk.start, blk.stop, replaced[bi], blk.before, blk.after))
         out_lines.extend(lines[pos:])
         # ;TIME_ELAPSED: lines end blocks (never inside one): each moves by what the blocks before it add
         time_lines = [t + sum(added for stop, added in shifts if t >= stop) for t in parse.time_elapsed_lines]
         if not all(out_lines[t].startswith(";TIME_ELAPSED:") for t in time_lines):
             time_lines = _time_lines(out_lines)
-        return (out_lines, time_lines), dt, stats
+        return (out_lines, time_lines, edits), dt, stats
 
     def _share_paths(self, paths, fill_blocks: list[int], blocks, part, penalty: float, assigned: dict) -> None:
         """Cut the layer's route into one run of consecutive paths per Cura FILL block (`_plan_runs`).

@@ -61,6 +61,9 @@ class ProcessSettings:
     acceleration: float = 3000.0
     jerk: float = DEFAULT_JERK  # mm/s, XY corner speed limit of the time estimate (Cura's machine_max_jerk_xy)
     feather: float = 0.0
+    # a layer that repeats an earlier one (a prism's middle layers) is written from that layer's
+    # result (gcode/replay.py); False processes every layer on its own (for tests: same output)
+    repeat_layers: bool = True
 
     def validate(self) -> None:
         """Raise ValueError with a clear message for impossible values."""

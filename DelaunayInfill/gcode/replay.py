@@ -1,0 +1,291 @@
+"""Repeated layers: written from an earlier layer's result instead of being processed again.
+
+A prism's middle layers are the same G-code but for their Z and (absolute E) E numbers: the same
+walls, the same FILL, the same travel.  Such a layer gets the earlier layer's new FILL blocks, their
+E numbers moved by the change of the E register where each block starts and their Z numbers by the
+layer step, and its own exact E register handed back after each block (``G92 E``).  Everything
+outside the FILL blocks is the layer's own text, as always.
+
+A layer repeats a recorded one when
+
+* its text, without its Z and E numbers, ``;LAYER:`` and ``;TIME_ELAPSED:`` values, is the recorded
+  layer's (`layer_words`), and the caller's key (machine state before the layer, what the processing
+  remembers from layer to layer) is equal too;
+* every E word moves the filament by what the recorded one did, to Cura's rounding (1e-5), and every
+  Z word is the recorded one plus the same step as the Z before the layer.
+
+The caller checks what the G-code cannot say (the user's density regions at the layer's height).
+"""
+
+from __future__ import annotations
+
+import re
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .emit import fmt
+from .read import MachineState, RetractionModel
+
+__all__ = ["LayerWords", "BlockEdit", "LayerRecord", "RepeatCache", "layer_words", "record_layer", "replay_layer"]
+
+# an E or Z word (with the space before it, which `split` drops): the numbers a repeated layer changes
+_WORD = re.compile(r" ([EZ]-?[\d.]+)")
+_LETTER_E_OR_Z = min(ord("E"), ord("Z"))
+_E = ord("E")
+_E_TOLERANCE = 3e-5  # E units: Cura rounds every E word to 1e-5, so two equal moves may differ by that twice
+_Z_TOLERANCE = 1e-7  # mm
+
+
+@dataclass
+class LayerWords:
+    """A layer chunk split into its skeleton and its E and Z words.
+
+    ``key`` the text without its E/Z numbers and counters, plus the letters of the words in order;
+    ``values`` shape (n,) the words' numbers; ``is_e`` shape (n,) bool, True for E words, False for Z.
+    """
+
+    key: str
+    values: np.ndarray
+    is_e: np.ndarray
+
+
+def layer_words(text: str) -> LayerWords | None:
+    """`text` (a chunk that starts with ``;LAYER:``) split for look-ups; None when a word is no number."""
+    parts = _WORD.split(text)
+    skeleton = "".join(parts[::2])
+    # the counters that differ from layer to layer: the first line's layer number, the last
+    # ;TIME_ELAPSED: (one anywhere else stays in the key: such a layer is just never repeated)
+    skeleton = skeleton[skeleton.find("\n") :]
+    at = skeleton.rfind(";TIME_ELAPSED:", len(skeleton) - 200)
+    if at >= 0:
+        end = skeleton.find("\n", at)
+        skeleton = skeleton[: at + 14] + (skeleton[end:] if end >= 0 else "")
+    words = parts[1::2]
+    if not words:
+        return LayerWords(skeleton, np.zeros(0), np.zeros(0, dtype=bool))
+    joined = " ".join(words)
+    chars = np.frombuffer(joined.encode("ascii"), dtype=np.uint8)
+    letters = chars[chars >= _LETTER_E_OR_Z]  # (the words are [EZ][-.0-9]*: only their letters are that high)
+    try:
+        values = np.array(joined.replace("E", "").replace("Z", "").split(), dtype=np.float64)
+    except ValueError:
+        return None
+    if len(values) != len(words) or not np.isfinite(values).all():
+        return None
+    return LayerWords(skeleton + "\n" + letters.tobytes().decode("ascii"), values, letters == _E)
+
+
+class BlockEdit:
+    """One new FILL block of a recorded layer, ready to be written for a repeat of that layer.
+
+    ``start``/``stop`` the block's lines in the layer (``start`` kept, as `emit_block` expects);
+    ``e_before`` the E register before the block; ``e_word_before``/``e_word_after`` how many of the
+    layer's E words come before the block's first/after its last line (0: the register is the one
+    before the layer).
+    """
+
+    def __init__(self, start: int, stop: int, lines: list[str], e_before: float, e_word_before: int,
+                 e_word_after: int):
+        self.start, self.stop = start, stop
+        self.e_before = e_before
+        self.e_word_before, self.e_word_after = e_word_before, e_word_after
+        self.empty = not lines
+        parts = _WORD.split("\n".join(lines))
+        self.parts = parts
+        self.e_at: list[int] = []  # parts index of each E word that the E register moves
+        self.e_fixed: list[bool] = []  # written with five decimals always (an extrusion), else as `fmt`
+        e_units: list[int] = []
+        self.z_at: list[int] = []
+        self.z_values: list[float] = []
+        self.g92_at: list[int] = []  # parts index of each "G92 E" word: set to the layer's own E register
+        for i in range(1, len(parts), 2):
+            word = parts[i]
+            line_head = parts[i - 1][parts[i - 1].rfind("\n") + 1 :]
+            if word[0] == "Z":
+                self.z_at.append(i)
+                self.z_values.append(float(word[1:]))
+            elif line_head.startswith("G92"):
+                self.g92_at.append(i)
+            else:
+                self.e_at.append(i)
+                self.e_fixed.append("X" in line_head or "Y" in line_head)
+                e_units.append(round(float(word[1:]) * 100000))
+        self.e_units = np.array(e_units, dtype=np.int64)
+        # every word is in one of the lists above: `render` writes each one back
+
+    def render(self, e_shift_units: int, z_shift: float, e_after: float) -> str:
+        """The block's text with E words moved by `e_shift_units` (1e-5 E), Z words by `z_shift` mm."""
+        parts = list(self.parts)
+        if self.e_at:
+            for i, units, fixed in zip(self.e_at, (self.e_units + e_shift_units).tolist(), self.e_fixed, strict=True):
+                value = units / 100000
+                parts[i] = f" E{value:.5f}" if fixed else f" E{fmt(value, 5)}"
+        for i, z in zip(self.z_at, self.z_values, strict=True):
+            parts[i] = f" Z{fmt(z + z_shift, 3)}"
+        for i in self.g92_at:
+            parts[i] = f" E{fmt(e_after, 5)}"
+        return "".join(parts)
+
+
+@dataclass
+class LayerRecord:
+    """What a processed layer did, to be done again for its repeats.
+
+    ``values`` the recorded layer's word numbers (`LayerWords`); ``e_start``/``z_start`` the E register
+    and Z before it; ``end`` the machine state after it; ``layer_z`` its height; ``time_lines`` its
+    ``;TIME_ELAPSED:`` lines; ``changed`` whether its text changed besides those; ``extra`` the caller's
+    (totals to add again, the retraction model after the layer, the regions' sections).
+    """
+
+    values: np.ndarray
+    is_e: np.ndarray
+    relative_e: bool
+    e_start: float
+    z_start: float
+    end: MachineState
+    layer_z: float
+    blocks: list[BlockEdit]
+    time_lines: list[int]
+    changed: bool
+    retraction_after: RetractionModel
+    extra: dict = field(default_factory=dict)
+
+
+class RepeatCache:
+    """The last `size` recorded layers, by their words' key and the caller's key."""
+
+    def __init__(self, size: int = 16):
+        self.size = size
+        self._records: OrderedDict = OrderedDict()
+
+    def get(self, key) -> LayerRecord | None:
+        rec = self._records.get(key)
+        if rec is not None:
+            self._records.move_to_end(key)
+        return rec
+
+    def put(self, key, record: LayerRecord) -> None:
+        self._records[key] = record
+        self._records.move_to_end(key)
+        while len(self._records) > self.size:
+            self._records.popitem(last=False)
+
+
+def _register_at(words: LayerWords, count: int, start: float) -> float:
+    """The E register after the layer's first `count` E words (`start`: before the layer)."""
+    if count == 0:
+        return start
+    return float(words.values[words.is_e][count - 1])
+
+
+def record_layer(
+    text: str,
+    words: LayerWords,
+    lines: list[str],
+    state_before: MachineState,
+    end: MachineState,
+    layer_z: float,
+    edits: list[tuple[int, int, list[str], MachineState, MachineState]],
+    time_lines: list[int],
+    changed: bool,
+    retraction_after: RetractionModel,
+) -> LayerRecord | None:
+    """A record of a processed layer, or None when its repeats could not be written from it.
+
+    Parameters
+    ----------
+    text, words, lines : the layer chunk, its `layer_words` and its lines (``text.split("\\n")``).
+    state_before, end : MachineState before and after the layer.
+    layer_z : float, mm.
+    edits : list of (start, stop, new lines, state before, state after), one per replaced FILL block.
+    time_lines : indices of the chunk's ``;TIME_ELAPSED:`` lines.
+    changed : bool, whether the layer's text changed (apart from ``;TIME_ELAPSED:``).
+    retraction_after : RetractionModel after the layer.
+    """
+    if state_before.relative_xyz or end.relative_xyz or state_before.relative_e != end.relative_e:
+        return None
+    if "M82" in text or "M83" in text or "G91" in text or "G90" in text:
+        return None  # a mode change: E words would not all be registers (or all deltas)
+    relative = end.relative_e
+    e_values = words.values[words.is_e]
+    z_values = words.values[~words.is_e]
+    # The words must be what the parse saw: the last E and Z words set the state after the layer.
+    if not relative and (e_values[-1] if len(e_values) else state_before.e) != end.e:
+        return None
+    if (z_values[-1] if len(z_values) else state_before.z) != end.z:
+        return None
+    if len(e_values) and not relative and edits:
+        # where each line starts, and where each E word is, in characters
+        line_start = np.zeros(len(lines) + 1, dtype=np.int64)
+        np.cumsum([len(line) + 1 for line in lines], out=line_start[1:])
+        e_offsets = np.array([m.start(1) for m in _WORD.finditer(text) if m.group(1)[0] == "E"], dtype=np.int64)
+        if len(e_offsets) != len(e_values):
+            return None
+    blocks = []
+    for start, stop, new_lines, before, after in edits:
+        if relative:
+            e_before_count = e_after_count = 0
+        else:
+            e_before_count = int(np.searchsorted(e_offsets, line_start[start])) if len(e_values) else 0
+            e_after_count = int(np.searchsorted(e_offsets, line_start[stop])) if len(e_values) else 0
+            if _register_at(words, e_before_count, state_before.e) != before.e:
+                return None
+            if _register_at(words, e_after_count, state_before.e) != after.e:
+                return None
+        edit = BlockEdit(start, stop, new_lines, before.e, e_before_count, e_after_count)
+        if relative and edit.g92_at:
+            return None
+        if not edit.empty and edit.render(0, 0.0, after.e) != "\n".join(new_lines):
+            return None  # written in a way `render` does not reproduce
+        blocks.append(edit)
+    return LayerRecord(words.values, words.is_e, relative, state_before.e, state_before.z, end.copy(), layer_z,
+                       blocks, list(time_lines), changed, retraction_after)
+
+
+def replay_layer(
+    text: str, words: LayerWords, record: LayerRecord, state_before: MachineState, time_delta: float
+) -> tuple[str, MachineState, float] | None:
+    """The layer `text` written from `record`, the machine state after it and its height.
+
+    None when its E or Z words do not repeat the recorded layer's (then process it).  `time_delta`
+    (s) is added to its ``;TIME_ELAPSED:`` lines (the layer's own change included).
+    """
+    if len(words.values) != len(record.values) or state_before.relative_e != record.relative_e:
+        return None
+    is_e = record.is_e
+    diff = words.values - record.values
+    z_shift = state_before.z - record.z_start
+    if not (np.abs(diff[~is_e] - z_shift) <= _Z_TOLERANCE).all():
+        return None
+    e_shift = 0.0 if record.relative_e else state_before.e - record.e_start
+    if not (np.abs(diff[is_e] - e_shift) <= _E_TOLERANCE).all():
+        return None
+    lines = text.split("\n")
+    for i in record.time_lines:
+        old = float(lines[i][14:].strip() or 0)
+        lines[i] = f";TIME_ELAPSED:{old + time_delta:.6f}"
+    out: list[str] = []
+    pos = 0
+    for blk in record.blocks:
+        out.extend(lines[pos : blk.start + 1])
+        pos = blk.stop
+        if blk.empty:
+            continue
+        if record.relative_e:
+            out.append(blk.render(0, z_shift, 0.0))
+            continue
+        e_before = _register_at(words, blk.e_word_before, state_before.e)
+        e_after = _register_at(words, blk.e_word_after, state_before.e)
+        out.append(blk.render(round((e_before - blk.e_before) * 100000), z_shift, e_after))
+    out.extend(lines[pos:])
+    end = record.end.copy()
+    z_words = words.values[~is_e]
+    end.z = float(z_words[-1]) if len(z_words) else state_before.z
+    if record.relative_e:
+        end.e = state_before.e + (record.end.e - record.e_start)
+    else:
+        end.e = _register_at(words, int(is_e.sum()), state_before.e)
+    layer_z = round(record.layer_z + z_shift, 6)
+    return "\n".join(out), end, layer_z

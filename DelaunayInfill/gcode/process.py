@@ -515,6 +515,7 @@ class _Run:
         out, self.state, self.prev_z = done
         counted, e_before, e_delta, tally, dt = added
         r = self.report
+        r.layers_repeated += 1
         for name, value in zip(_COUNTED, counted, strict=True):
             if value:
                 setattr(r, name, getattr(r, name) + value)

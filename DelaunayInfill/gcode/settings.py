@@ -190,6 +190,7 @@ class ProcessReport:
     layers_total: int = 0
     layers_processed: int = 0
     layers_kept: int = 0
+    layers_repeated: int = 0  # of the processed and kept ones: written from an earlier layer they repeat
     failed_layers: list[int] = field(default_factory=list)
     failure_messages: list[str] = field(default_factory=list)
     regions: list[RegionReport] = field(default_factory=list)
@@ -227,6 +228,7 @@ class ProcessReport:
 
         rows = [
             ("layers", f"{self.layers_total}", f"{self.layers_processed} processed", f"{self.layers_kept} kept, {len(self.failed_layers)} failed"),
+            ("  repeats", "", f"{self.layers_repeated} layers", "written from an earlier one"),
             ("FILL blocks", "", f"{self.blocks_replaced} replaced", f"{self.blocks_kept} kept as Cura's"),
             (f"filament ({unit})", f"{self.filament_before_mm:.1f}", f"{self.filament_after_mm:.1f}", pct(self.filament_after_mm, self.filament_before_mm)),
             ("print time", hms(self.time_before_s), hms(self.time_after_s), pct(self.time_after_s, self.time_before_s)),

@@ -12,7 +12,7 @@ import subprocess
 import pytest
 
 from . import gcode_check as gc
-from .conftest import cli_command
+from .conftest import cli_command, split_like_cura
 
 
 def _parsed(path_or_text: str, is_path: bool = True) -> gc.Parsed:
@@ -117,6 +117,24 @@ def test_in_memory_and_streamed_outputs_are_identical(processed_api, tmp_path):
     report = process_file(processed_api.sliced.gcode, str(out))
     assert not report.failed_layers
     assert out.read_text(encoding="utf-8") == processed_api.text
+
+
+def test_repeated_layers_are_the_g_code_processing_them_gives(processed_api):
+    """Layers written as repeats of an earlier one (the default) against every layer processed on its
+    own: the same text, E numbers to Cura's rounding."""
+    from gcode_compare import differences
+
+    from DelaunayInfill import process_gcode
+    from DelaunayInfill.gcode import ProcessSettings
+
+    with open(processed_api.sliced.gcode, encoding="utf-8") as f:
+        original = f.read()
+    layers, report = process_gcode(split_like_cura(original), ProcessSettings(repeat_layers=False))
+    assert report.layers_repeated == 0
+    assert differences("".join(layers), processed_api.text, 1e-4) == []
+    assert report.layers_processed == processed_api.report.layers_processed
+    assert processed_api.report.layers_repeated > 0.3 * processed_api.report.layers_total, \
+        processed_api.report.format_table()
 
 
 def test_same_seed_same_output_other_seed_other_infill(slices, tmp_path):

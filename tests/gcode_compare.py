@@ -1,0 +1,40 @@
+"""Compare two G-code texts that should be the same but for E rounding (test helper, no project code)."""
+
+from __future__ import annotations
+
+import re
+
+_NUMBER = re.compile(r"-?\d*\.?\d+")
+_E_WORD = re.compile(r"(?<=[ \t])E(-?\d*\.?\d+)")
+
+
+def differences(a: str, b: str, e_tolerance: float) -> list[str]:
+    """Lines where `a` and `b` differ by more than E numbers within `e_tolerance` (at most 10 listed).
+
+    Everything but the E words must be equal character for character; ``;TIME_ELAPSED:`` values may
+    differ by 1e-3 s (they sum per-layer changes).
+    """
+    la, lb = a.split("\n"), b.split("\n")
+    if len(la) != len(lb):
+        return [f"{len(la)} lines against {len(lb)}"]
+    out = []
+    for number, (x, y) in enumerate(zip(la, lb, strict=True)):
+        if x == y:
+            continue
+        if x.startswith(";TIME_ELAPSED:") and y.startswith(";TIME_ELAPSED:"):
+            if abs(float(x[14:]) - float(y[14:])) <= 1e-3:
+                continue
+        elif _E_WORD.sub("E", x) == _E_WORD.sub("E", y):
+            ex = [float(v) for v in _E_WORD.findall(x)]
+            ey = [float(v) for v in _E_WORD.findall(y)]
+            if all(abs(p - q) <= e_tolerance for p, q in zip(ex, ey, strict=True)):
+                continue
+        out.append(f"line {number}: {x!r} != {y!r}")
+        if len(out) >= 10:
+            break
+    return out
+
+
+def header_numbers(text: str, lines: int = 20) -> list[float]:
+    """The numbers of the first `lines` lines (Cura's header: time, filament)."""
+    return [float(v) for v in _NUMBER.findall("\n".join(text.split("\n")[:lines]))]

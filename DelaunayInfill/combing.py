@@ -17,7 +17,7 @@ from scipy.sparse.csgraph import dijkstra
 from shapely.geometry.polygon import orient
 
 from .decomposition import cross_turn
-from .geometry import contains_xy, polygons_of, rings_of, to_multipolygon
+from .geometry import SHAPELY2, contains_xy, covers_segments, polygons_of, rings_of, to_multipolygon
 from .routing import clip_segments
 
 __all__ = ["CombingArea", "segments_inside"]
@@ -44,11 +44,16 @@ def segments_inside(starts: np.ndarray, ends: np.ndarray, area) -> np.ndarray:
         return result
     segments = np.stack([starts[known], ends[known]], axis=1)
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
-    pieces, source = clip_segments(segments, area, return_index=True)
-    inside = np.bincount(source, np.hypot(*(pieces[:, 1] - pieces[:, 0]).T), minlength=len(segments))
     point = length <= 1e-9
-    point_inside = contains_xy(area, segments[:, 0, 0], segments[:, 0, 1])
-    result[known] = np.where(point, point_inside, inside >= length - 1e-6)
+    inside = covers_segments(area, segments[~point]) if SHAPELY2 else None
+    if inside is None:  # shapely 1.8: clip them, and compare the lengths
+        pieces, source = clip_segments(segments, area, return_index=True)
+        clipped = np.bincount(source, np.hypot(*(pieces[:, 1] - pieces[:, 0]).T), minlength=len(segments))
+        inside = (clipped >= length - 1e-6)[~point]
+    found = np.zeros(len(segments), dtype=bool)
+    found[~point] = inside
+    found[point] = contains_xy(area, segments[point, 0, 0], segments[point, 0, 1])
+    result[known] = found
     return result
 
 

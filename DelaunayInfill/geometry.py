@@ -26,6 +26,7 @@ __all__ = [
     "SHAPELY2",
     "as_area",
     "contains_xy",
+    "covers_segments",
     "distances",
     "empty_area",
     "polygons_from",
@@ -174,3 +175,25 @@ def regular_polygon(center, radius: float, sides: int, start_angle: float = math
     """A regular polygon (used for round density regions and test shapes)."""
     a = start_angle + np.arange(sides) * 2 * math.pi / sides
     return Polygon(np.c_[center[0] + radius * np.cos(a), center[1] + radius * np.sin(a)])
+
+
+def covers_segments(area, segments: np.ndarray) -> np.ndarray | None:
+    """Whether `area` covers each straight segment (no point of it outside), or None on shapely 1.8.
+
+    Parameters
+    ----------
+    area : (Multi)Polygon
+    segments : ndarray, shape (k, 2, 2)
+        Start and end points, mm; none of zero length.
+
+    Returns
+    -------
+    ndarray of bool, shape (k,), or None
+        None where shapely has no vectorized predicates (1.8): the caller clips instead.
+    """
+    if not SHAPELY2:  # pragma: no cover - exercised on the shapely 1.8 CI leg
+        return None
+    if len(segments) == 0:
+        return np.zeros(0, dtype=bool)
+    shapely.prepare(area)  # (in place, once: the same part is asked again and again)
+    return np.asarray(shapely.covers(area, shapely.linestrings(np.asarray(segments, dtype=float))), dtype=bool)

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..combing import CombingArea
+from ..combing import CombingArea, segments_inside
 from ..geometry import contains_xy, polygons_of, to_multipolygon, unary_union
-from ..routing import clip_segments, order_paths
+from ..routing import order_paths
 from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of, split_by_line_ends
 from .emit import EmitParams, emit_block
 from .estimate import move_seconds, move_times
@@ -1049,10 +1049,7 @@ class _TravelCost:
         if self.penalty <= 0 or self.part is None or not known.any():
             return cost
         idx = np.flatnonzero(known & (d > 1e-9))
-        segs = np.stack([starts[idx], ends[idx]], axis=1)
-        pieces, source = clip_segments(segs, self.part, return_index=True)
-        inside = np.bincount(source, np.hypot(*(pieces[:, 1] - pieces[:, 0]).T), len(idx))
-        cost[idx] += np.where(inside >= d[idx] - 1e-6, 0.0, self.penalty)
+        cost[idx] += np.where(segments_inside(starts[idx], ends[idx], self.part), 0.0, self.penalty)
         return cost
 
 

@@ -26,7 +26,8 @@ patterns are compared like for like.
 With ``--stages`` a third table splits one more ``process_gcode`` run (not
 the timed ones) into its stages: parsing, infill areas, pattern lookups and
 builds, clipping and routing, rebuilding the modifiers' shapes from Cura's
-line ends, sharing the route among Cura's FILL blocks, G-code writing, the rest.
+line ends, sharing the route among Cura's FILL blocks, G-code writing, layers
+written as repeats of an earlier one (gcode/replay.py), the rest.
 
 Usage::
 
@@ -63,6 +64,7 @@ STAGES = (
     ("modifier split", "DelaunayInfill.gcode.process", "split_by_line_ends"),
     ("runs to blocks", "DelaunayInfill.gcode.process", "_plan_runs"),
     ("write G-code", "DelaunayInfill.gcode.process", "emit_block"),
+    ("repeated layers", "DelaunayInfill.gcode.process", "_Run._replay"),
 )
 
 
@@ -228,7 +230,7 @@ def run(model_names: list[str], density: float, out: str, repeats: int = 3, stag
             stage_rows.append((name, slice_seconds, stage_times(chunks)))
         speed_rows.append((name, grid_text.count("\n"), slice_seconds, process_seconds, process_seconds / slice_seconds,
                            slice_cpu, process_cpu, process_cpu / slice_cpu, min(times) / slice_best,
-                           len(report.failed_layers)))
+                           len(report.failed_layers), f"{report.layers_repeated}/{report.layers_total}"))
         stats = {p: gcode_stats(slices[p][0]) for p in PATTERNS}
         stats["delaunay"] = gcode_stats(new_text)
         for pattern, s in stats.items():
@@ -241,12 +243,13 @@ def format_tables(speed_rows, output_rows, density, stage_rows=()) -> str:
     out = [f"Density {density:g} %, 0.2 mm layers, 0.4 mm line width, CuraEngine {_engine_version()}, "
            f"load average {load:.2f}.", ""]
     out += ["| model | G-code lines | CuraEngine slice, wall (s) | process_gcode, wall (s) | ratio (target <= 1.0) "
-            "| CuraEngine CPU (s) | process_gcode CPU (s) | CPU ratio | ratio of fastest runs | failed layers |",
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for name, lines, s, p, ratio, s_cpu, p_cpu, cpu_ratio, best_ratio, failed in speed_rows:
+            "| CuraEngine CPU (s) | process_gcode CPU (s) | CPU ratio | ratio of fastest runs | failed layers "
+            "| layers repeated |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for name, lines, s, p, ratio, s_cpu, p_cpu, cpu_ratio, best_ratio, failed, repeated in speed_rows:
         mark = "" if ratio <= 1.0 else " (over)"
         out.append(f"| {name} | {lines} | {s:.3f} | {p:.3f} | {ratio:.2f}x{mark} | {s_cpu:.3f} | {p_cpu:.3f} | "
-                   f"{cpu_ratio:.2f}x | {best_ratio:.2f}x | {failed} |")
+                   f"{cpu_ratio:.2f}x | {best_ratio:.2f}x | {failed} | {repeated} |")
     out += ["", "| model | infill | filament (m) | vs grid (target +-3 %) | print time, own estimate (min) | "
                 "vs grid (target <= 1.05x) | time in file (min) | infill travel (m) | vs triangles (target <= 1.0x) | "
                 "infill retractions |",

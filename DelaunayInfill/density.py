@@ -149,6 +149,33 @@ class DensityMap:
         signed = np.where(inside, d, -d)
         return np.clip(0.5 + signed / self.feather, 0.0, 1.0)
 
+    def labels(self, xy: np.ndarray) -> np.ndarray:
+        """Whose density holds at each point, sharp borders: 0 the base, k region k (later regions win).
+
+        Parameters
+        ----------
+        xy : ndarray, shape (m, 2)
+
+        Returns
+        -------
+        ndarray of int, shape (m,)
+            Indices into `densities`.
+        """
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        x, y = xy[:, 0], xy[:, 1]
+        out = np.zeros(len(xy), dtype=np.intp)
+        free = np.ones(len(xy), dtype=bool)
+        # Last region first: a point it holds is not tested against earlier ones (they lose there).
+        # Only points inside a region's bounding box are tested (the rest cannot be inside).
+        for k in range(len(self.regions), 0, -1):
+            poly = self.regions[k - 1][0]
+            x0, y0, x1, y1 = poly.bounds
+            near = (free & (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)).nonzero()[0]
+            hit = near[contains_xy(poly, x[near], y[near])]
+            out[hit] = k
+            free[hit] = False
+        return out
+
     def at(self, xy: np.ndarray) -> np.ndarray:
         """Density at points.
 
@@ -162,16 +189,9 @@ class DensityMap:
             Density fraction at each point.
         """
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
-        rho = np.full(len(xy), self.base)
         if self.feather <= 0:
-            # Sharp borders: a region's density wherever it holds the point (later regions win).
-            # Only points inside its bounding box are tested (the rest cannot be inside).
-            x, y = xy[:, 0], xy[:, 1]
-            for poly, dens in self.regions:
-                x0, y0, x1, y1 = poly.bounds
-                near = ((x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)).nonzero()[0]
-                rho[near[contains_xy(poly, x[near], y[near])]] = dens
-            return rho
+            return np.asarray(self.densities, dtype=float)[self.labels(xy)]
+        rho = np.full(len(xy), self.base)
         for k, (_, dens) in enumerate(self.regions):
             w = self._weights(k, xy)
             rho = rho * (1.0 - w) + dens * w

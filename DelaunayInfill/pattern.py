@@ -47,6 +47,7 @@ _TOLERANCE = 0.0015  # calibration stops within 0.15 percentage points
 _MAX_ITERATIONS = 8
 _LOOP_TOLERANCE = 0.003  # several zones: the loop stops within 0.3 points (balancing does the rest)
 _SLIVER = 1.5  # hull triangles with a circumradius above 1.5 r are not part of the pattern
+_COARSE = 36.0  # several zones: a zone under this many squared radii is only balanced once off target
 
 
 def segment_length(segments: np.ndarray) -> float:
@@ -80,6 +81,8 @@ class _ZoneMeter:
         self.piece = piece
         self.present = [k for k, zone in enumerate(zones) if not zone.is_empty and zone.area > 0]
         self.bounds = {k: zones[k].bounds for k in self.present}
+        corners = np.array(list(self.bounds.values()), dtype=float).reshape(-1, 4)
+        self.extent = (*corners[:, :2].min(axis=0), *corners[:, 2:].max(axis=0)) if len(corners) else None
         edges = [boundary_segments(zones[k]) for k in self.present]
         edges = np.concatenate(edges) if edges else np.zeros((0, 2, 2))
         self.edges, self.tree = edges, None
@@ -93,17 +96,25 @@ class _ZoneMeter:
         out = np.zeros((len(self.zones), len(segments)))
         if self.tree is None or len(segments) == 0:
             return out
+        # Segments clear of the zones' common bounding box have nothing inside (a pattern
+        # covers its footprint grown by about a radius: many of its edges are out there).
+        x0, y0, x1, y1 = self.extent
+        lo, hi = segments.min(axis=1), segments.max(axis=1)
+        touching = np.flatnonzero((hi[:, 0] >= x0) & (lo[:, 0] <= x1) & (hi[:, 1] >= y0) & (lo[:, 1] <= y1))
+        if touching.size < len(segments):
+            out[:, touching] = self.inside_all(segments[touching])
+            return out
         length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
         mid = 0.5 * (segments[:, 0] + segments[:, 1])
         # Distances beyond `reach` only need to be known as "far" (inf): the tree prunes them.
         reach = 0.5 * self.piece + 0.5 * float(length.max()) + 1e-3
         sure = self.tree.query(mid, distance_upper_bound=reach)[0] - 0.5 * self.piece > 0.5 * length + 1e-9
         sure_idx = np.flatnonzero(sure)
-        for k in self.present:
-            hit = sure_idx[self._contains(k, mid[sure_idx])]
-            out[k, hit] = length[hit]
         unsure = np.flatnonzero(~sure)
         if unsure.size == 0:
+            for k in self.present:
+                hit = sure_idx[self._contains(k, mid[sure_idx])]
+                out[k, hit] = length[hit]
             return out
         # Long segments near a boundary: split into short pieces first, most of which are
         # then sure; the few left are cut against nearby boundary edges only.
@@ -119,8 +130,13 @@ class _ZoneMeter:
             sub_source = np.r_[sub_source, source[close][sid]]
             sub_length = np.r_[sub_length, sub]
             sub_mid = np.r_[sub_mid, smid]
+        # One point-in-zone test per zone for the sure midpoints and the pieces' together.
+        tested = np.concatenate((mid[sure_idx], sub_mid))
         for k in self.present:
-            hit = self._contains(k, sub_mid)
+            hit = self._contains(k, tested)
+            split = np.searchsorted(hit, sure_idx.size)
+            out[k, sure_idx[hit[:split]]] = length[sure_idx[hit[:split]]]
+            hit = hit[split:] - sure_idx.size
             out[k, unsure] = np.bincount(sub_source[hit], sub_length[hit], unsure.size)
         return out
 
@@ -147,7 +163,7 @@ class _ZoneMeter:
         """
         edges = self.edges
         reach = 0.5 * (float(length.max()) + self.piece) + 1e-6
-        sdm = cKDTree(segments.mean(axis=1)).sparse_distance_matrix(self.tree, reach, output_type="ndarray")
+        sdm = _quick_tree(segments.mean(axis=1)).sparse_distance_matrix(self.tree, reach, output_type="ndarray")
         ia, ib = sdm["i"].astype(np.intp), sdm["j"].astype(np.intp)
         p, r = segments[ia, 0], segments[ia, 1] - segments[ia, 0]
         q, e = edges[ib, 0], edges[ib, 1] - edges[ib, 0]
@@ -171,8 +187,17 @@ class _ZoneMeter:
 
     def densities(self, segments: np.ndarray, width: float) -> np.ndarray:
         """Measured density per zone (NaN where a zone has no area)."""
-        total = self.inside_all(segments).sum(axis=1)
+        return self.densities_of(self.inside_all(segments), width)
+
+    def densities_of(self, inside: np.ndarray, width: float) -> np.ndarray:
+        """Measured density per zone from `inside_all`'s lengths (zones, m) (NaN where a zone has no area)."""
+        total = inside.sum(axis=1)
         return np.array([total[k] * width / z.area if z.area > 0 else np.nan for k, z in enumerate(self.zones)])
+
+
+def _quick_tree(points: np.ndarray) -> cKDTree:
+    """A k-d tree built for a few queries: midpoint splits build faster than median ones."""
+    return cKDTree(points, balanced_tree=False, compact_nodes=False)
 
 
 def _split_segments(segments: np.ndarray, longest: float) -> tuple[np.ndarray, np.ndarray]:
@@ -357,6 +382,9 @@ class InfillPattern:
         # (A single zone is fine-tuned by scaling instead.)
         small = settled & np.array([z.area < 16.0 * radius_of(t) ** 2 for z, t in zip(zones, targets)])
         small &= np.count_nonzero(settled) > 1
+        # Zones under about 6 x 6 of their radii hold a few dozen samples: one sampling to the
+        # next moves them by several points, so re-sampling for them alone is noise.
+        coarse = settled & np.array([z.area < _COARSE * radius_of(t) ** 2 for z, t in zip(zones, targets)])
         factors = np.ones(len(targets))
         meter = _ZoneMeter(zones)
         # A single zone is calibrated by scaling one sampling (continuous, cheap) as soon as
@@ -377,13 +405,14 @@ class InfillPattern:
             triangles = _drop_slivers(points, delaunay_triangles(points), radius_fn)
             edges = unique_edges(triangles)
             segments = points[edges]
-            measured = meter.densities(segments, width)
+            inside = meter.inside_all(segments)
+            measured = meter.densities_of(inside, width)
             error = np.abs(measured - targets)
             # Small zones above target can be thinned afterwards; shortfalls cannot.
             error = np.where(small & (measured > targets), 0.25 * error, error)
             worst = float(np.nanmax(np.where(settled, error, 0.0))) if len(error) else 0.0
             if best is None or worst < best[0]:
-                best = (worst, points, triangles, segments, measured, iteration, edges)
+                best = (worst, points, triangles, segments, measured, iteration, edges, inside)
             if calibration == "paper" or worst <= (_TOLERANCE if single else _LOOP_TOLERANCE):
                 break
             ok = settled & np.isfinite(measured) & (measured > 0)
@@ -408,11 +437,13 @@ class InfillPattern:
                 continue
             if iteration - best[5] >= 2:  # two samplings without improvement: the rest is noise
                 break
+            if not (settled & ~coarse & (np.abs(measured - targets) > _LOOP_TOLERANCE)).any():
+                break  # only coarse zones are off: balancing (below) does better than re-sampling
             # Half steps (in log scale) down: small zones respond in jumps and
             # full steps would oscillate; zones that fall short take full steps
             # up, since what ends up too dense can be thinned afterwards.
             factors = factors * np.where(small & (step > 1.0), step, np.sqrt(step))
-        worst, points, triangles, segments, measured, iteration, edges = best
+        worst, points, triangles, segments, measured, iteration, edges, inside = best
         if single and worst > _TOLERANCE / 4:
             points, segments, measured = _fine_tune_scale(points, edges, meter, targets, measured, width,
                                                           scale_limit, area)
@@ -420,7 +451,10 @@ class InfillPattern:
             # Zones still off target after calibration (small ones, or dense ones next to a
             # sparse neighbour that keeps their samples apart) are balanced edge by edge.
             off = small | (settled & np.isfinite(measured) & (np.abs(measured - targets) > _TOLERANCE))
-            points, triangles, segments, measured = _balance_zones(points, triangles, meter, targets, width, off)
+            # The edges' inside lengths are known already: balancing measures only new edges.
+            known = {"keys": _edge_keys(edges), "values": inside}
+            points, triangles, segments, measured = _balance_zones(points, triangles, meter, targets, width, off,
+                                                                   known=known)
         return cls(segments, points, triangles, area, dmap, width, "seamless", calibration, list(measured), iteration)
 
     @classmethod
@@ -587,7 +621,7 @@ def _fine_tune_scale(points, edges, meter, targets, measured, width, limit, area
     return scaled, scaled[edges], measured
 
 
-def _balance_zones(points, triangles, meter, targets, width, small, rounds: int = 12):
+def _balance_zones(points, triangles, meter, targets, width, small, rounds: int = 12, known=None):
     """Bring zones that calibration cannot reach to their targets.
 
     A zone smaller than about two of its own radii cannot reach its target in
@@ -599,13 +633,14 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
     where the zone is emptiest and the triangulation stays Delaunay).
 
     Only the zones flagged in `small` are balanced; `meter` (`_ZoneMeter`)
-    holds the zones and measures them.
+    holds the zones and measures them; `known` (see `_inside_lengths`) may
+    hold the inside lengths of the triangles' edges already.
 
     Returns
     -------
     (points, triangles, segments, measured)
     """
-    known = {}  # inside lengths of edges already measured (points are only appended: indices stay)
+    known = {} if known is None else known  # edges measured (points are only appended: indices stay)
     for _ in range(rounds):
         segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known)
         short = [k for k in np.flatnonzero(small) if measured[k] < targets[k] - _TOLERANCE]
@@ -710,7 +745,7 @@ def _inside_lengths(edges, segments, meter, known: dict) -> np.ndarray:
     `known` holds ``"keys"`` (sorted int64 edge keys) and ``"values"``
     (zones, keys) from earlier calls on the same points.
     """
-    key = edges[:, 0].astype(np.int64) * (1 << 32) + edges[:, 1]
+    key = _edge_keys(edges)
     old_keys = known.get("keys", np.zeros(0, np.int64))
     old_values = known.get("values", np.zeros((len(meter.zones), 0)))
     slot = np.minimum(np.searchsorted(old_keys, key), max(len(old_keys) - 1, 0))
@@ -725,6 +760,11 @@ def _inside_lengths(edges, segments, meter, known: dict) -> np.ndarray:
     return values
 
 
+def _edge_keys(edges: np.ndarray) -> np.ndarray:
+    """One int64 per edge (e, 2) of vertex indices, ordered as the rows are (lexicographically)."""
+    return edges[:, 0].astype(np.int64) * (1 << 32) + edges[:, 1]
+
+
 def _drop_slivers(points: np.ndarray, triangles: np.ndarray, radius_fn) -> np.ndarray:
     """Remove hull triangles whose circumradius exceeds 1.5 x the local radius."""
     if len(triangles) == 0:
@@ -735,7 +775,7 @@ def _drop_slivers(points: np.ndarray, triangles: np.ndarray, radius_fn) -> np.nd
     lc = np.hypot(*(a - b).T)
     twice_area = np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
     circumradius = la * lb * lc / np.maximum(2.0 * twice_area, 1e-300)
-    local = radius_fn(points[triangles].reshape(-1, 2)).reshape(-1, 3).max(axis=1)
+    local = radius_fn(points)[triangles].max(axis=1)  # the radius at each corner, the largest
     return triangles[circumradius <= _SLIVER * local]
 
 

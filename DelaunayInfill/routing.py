@@ -47,7 +47,8 @@ def _subdivide(segments: np.ndarray, max_length: float) -> np.ndarray:
 
 
 _BOUNDARIES: dict[int, tuple] = {}  # id(area) -> (area, its boundary segments): areas are clipped against repeatedly
-_BRUTE_FORCE_PAIRS = 1024  # up to this many segment x boundary pairs, test them all (no k-d trees)
+_BRUTE_FORCE_PAIRS = 1024  # up to this many segment x boundary pairs, test them all (no sweep)
+_MAX_CANDIDATES = 4_000_000  # pairs the box sweep compares at most (beyond: pairs by distance)
 
 
 def _boundary_of(area) -> np.ndarray:
@@ -60,6 +61,32 @@ def _boundary_of(area) -> np.ndarray:
         _BOUNDARIES.clear()  # (clear, not evict one: safe if another thread clips at the same time)
     _BOUNDARIES[id(area)] = (area, boundary)
     return boundary
+
+
+def _meeting_pairs(segments: np.ndarray, length: np.ndarray, pieces: np.ndarray):
+    """The (segment, piece) pairs whose bounding boxes meet: index arrays (p,), (p,), by segment.
+
+    A superset of the crossing pairs, found by a sweep along the axis where the
+    pieces are narrowest: sorted by their lower end, the pieces that can meet a
+    segment's extent on that axis are one run of the order; only those are
+    compared box to box.  None when more than `_MAX_CANDIDATES` would be.
+    """
+    margin = 1e-6 * max(1.0, float(length.max()))
+    s_lo, s_hi = segments.min(axis=1) - margin, segments.max(axis=1) + margin
+    p_lo, p_hi = pieces.min(axis=1), pieces.max(axis=1)
+    widest = (p_hi - p_lo).max(axis=0)
+    axis = int(widest[1] < widest[0])
+    order = np.argsort(p_lo[:, axis], kind="stable")
+    sorted_lo = p_lo[order, axis]
+    first = np.searchsorted(sorted_lo, s_lo[:, axis] - widest[axis], side="left")
+    count = np.searchsorted(sorted_lo, s_hi[:, axis], side="right") - first
+    if int(count.sum()) > _MAX_CANDIDATES:
+        return None
+    ia = np.repeat(np.arange(len(segments), dtype=np.intp), count)
+    ib = order[np.arange(ia.size) - np.repeat(np.cumsum(count) - count - first, count)]
+    meet = (s_lo[ia, 0] <= p_hi[ib, 0]) & (s_hi[ia, 0] >= p_lo[ib, 0])
+    meet &= (s_lo[ia, 1] <= p_hi[ib, 1]) & (s_hi[ia, 1] >= p_lo[ib, 1])
+    return ia[meet], ib[meet].astype(np.intp)
 
 
 def clip_segments(segments: np.ndarray, area, *, return_index: bool = False):
@@ -92,12 +119,15 @@ def clip_segments(segments: np.ndarray, area, *, return_index: bool = False):
     ta = np.zeros(0)
     if len(boundary) and longest > 0:
         boundary = _subdivide(boundary, max(longest, 1e-3))
+        pairs = None
         if len(segments) * len(boundary) <= _BRUTE_FORCE_PAIRS:
-            # Few pairs: test them all.  Pairs the k-d trees would skip cannot intersect, so
-            # the crossings (and the result) are the same.
+            # Few pairs: test them all.  Pairs the box sweep or the k-d trees would skip cannot
+            # intersect, so the crossings (and the result) are the same.
             ia = np.repeat(np.arange(len(segments), dtype=np.intp), len(boundary))
             ib = np.tile(np.arange(len(boundary), dtype=np.intp), len(segments))
-        else:
+        elif (pairs := _meeting_pairs(segments, length, boundary)) is not None:
+            ia, ib = pairs
+        else:  # a degenerate layout (pieces wide on both axes everywhere): pairs by distance
             blen = np.hypot(*(boundary[:, 1] - boundary[:, 0]).T)
             reach = 0.5 * (longest + float(blen.max())) + 1e-6
             sdm = cKDTree(segments.mean(axis=1)).sparse_distance_matrix(

@@ -45,6 +45,7 @@ __all__ = ["sample_poisson_disk", "uncovered_fraction", "radius_function", "hash
 RadiusLike = float | Callable[[np.ndarray], np.ndarray]
 
 _CANDIDATE_SPACING = 0.5  # fast sampler: first grid spacing, in units of the smallest radius
+_ALL_PAIRS = 16384  # close_pairs: up to this many point pairs, test them all (no k-d trees)
 _BRIDSON_K = 30
 
 
@@ -140,6 +141,13 @@ def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: 
         q, rq = p, rp
     if len(p) == 0 or len(q) == 0:
         return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    if len(p) * len(q) <= _ALL_PAIRS:
+        # Few points (gap filling's later passes): every distance at once beats building trees.
+        hit = np.hypot(p[:, None, 0] - q[None, :, 0], p[:, None, 1] - q[None, :, 1]) < np.maximum(rp[:, None], rq)
+        if same:
+            hit &= np.arange(len(p))[:, None] < np.arange(len(p))
+        i, j = np.nonzero(hit)
+        return i.astype(np.intp), j.astype(np.intp)
     lo = float(min(rp.min(), rq.min()))
     # Radius classes (factor 2) keep each query bound tight: a pair is found
     # from the class holding its larger radius.
@@ -158,23 +166,24 @@ def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: 
     for c in classes:
         mp, mq = members_p[c], members_q[c]
         bound = float(max(rp[mp].max() if mp.size else 0.0, rq[mq].max() if mq.size else 0.0))
-        lower_q = np.flatnonzero(cls_q <= c)
         if same:
+            tree = _tree(p[mp]) if mp.size else None
             if mp.size > 1:
-                pairs = cKDTree(p[mp]).query_pairs(bound, output_type="ndarray")
+                pairs = tree.query_pairs(bound, output_type="ndarray")
                 ia, jb = mp[pairs[:, 0]], mp[pairs[:, 1]]
                 keep(ia, jb, np.hypot(*(p[ia] - p[jb]).T))
             lower = np.flatnonzero(cls_p < c)
             if mp.size and lower.size:
-                sdm = cKDTree(p[mp]).sparse_distance_matrix(cKDTree(p[lower]), bound, output_type="ndarray")
+                sdm = tree.sparse_distance_matrix(_tree(p[lower]), bound, output_type="ndarray")
                 keep(mp[sdm["i"]], lower[sdm["j"]], sdm["v"])
             continue
+        lower_q = np.flatnonzero(cls_q <= c)
         if mp.size and lower_q.size:  # p in class c against q in classes <= c
-            sdm = cKDTree(p[mp]).sparse_distance_matrix(cKDTree(q[lower_q]), bound, output_type="ndarray")
+            sdm = _tree(p[mp]).sparse_distance_matrix(_tree(q[lower_q]), bound, output_type="ndarray")
             keep(mp[sdm["i"]], lower_q[sdm["j"]], sdm["v"])
         lower_p = np.flatnonzero(cls_p < c)
         if mq.size and lower_p.size:  # q in class c against p in classes < c
-            sdm = cKDTree(q[mq]).sparse_distance_matrix(cKDTree(p[lower_p]), bound, output_type="ndarray")
+            sdm = _tree(q[mq]).sparse_distance_matrix(_tree(p[lower_p]), bound, output_type="ndarray")
             keep(lower_p[sdm["j"]], mq[sdm["i"]], sdm["v"])
     if not found_i:
         return np.zeros(0, np.intp), np.zeros(0, np.intp)

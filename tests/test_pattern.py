@@ -318,3 +318,23 @@ def test_density_at_sharp_borders_is_the_last_region_holding_the_point(seed):
     got = dmap.at(xy)
     assert np.array_equal(got, want)
     assert len(set(got.tolist())) == len(regions) + 1  # every region holds some point
+
+
+def test_only_coarse_zones_off_target_are_balanced_without_resampling(monkeypatch):
+    """A small part whose zones hold a few dozen samples each: one sampling, then balancing, and
+    the zones still end within the figure's 2 points of their targets (measured away from borders)."""
+    from DelaunayInfill import pattern as pattern_module
+
+    calls = []
+    sample = pattern_module.sample_poisson_disk
+    monkeypatch.setattr(pattern_module, "sample_poisson_disk", lambda *a, **k: calls.append(1) or sample(*a, **k))
+    scale = 0.5  # a 30 mm star: its tips are under 6 x 6 radii at every density here
+    small_star = Polygon(np.asarray(star().exterior.coords) * scale)
+    regions = [(Polygon(np.asarray(p.exterior.coords) * scale), d) for p, d in star_regions()]
+    pattern = InfillPattern.build(small_star, 0.3, 0.4, regions=regions, seed=0)
+    assert len(calls) == 1
+    targets = [0.3] + [d for _, d in regions]
+    measured = [(got, want) for got, want in zip(pattern.calibrated_densities, targets) if not math.isnan(got)]
+    assert len(measured) == len(regions)  # the regions tile the star: the base zone has no area
+    for got, want in measured:
+        assert abs(got - want) <= 0.02, (pattern.calibrated_densities, targets)

@@ -1,12 +1,13 @@
 """Clipping, chaining and ordering of infill segments."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import LineString, MultiLineString, Point, box
 from shapes import annulus, star
 
-from DelaunayInfill.geometry import contains_xy
+from DelaunayInfill.geometry import contains_xy, unary_union
 from DelaunayInfill.routing import chain_segments, clip_segments, odd_vertex_count, order_paths, travel_length
 from DelaunayInfill.sampling import sample_poisson_disk
 from DelaunayInfill.triangulation import delaunay_triangles, unique_edges
@@ -99,3 +100,28 @@ def test_two_opt_never_travels_more_than_greedy_and_keeps_every_path(seed, count
     assert abs(t_improved - travel_length(improved, start=(0.0, 0.0))) < 1e-6
     key = lambda p: tuple(sorted([tuple(p[0]), tuple(p[-1])]))  # noqa: E731
     assert sorted(map(key, improved)) == sorted(map(key, paths))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("count", [12, 600])
+def test_clip_finds_the_same_pieces_however_it_pairs_segments_with_the_boundary(monkeypatch, seed, count):
+    """The box sweep, the distance pairing (its fallback) and testing every pair give the same pieces
+    to the bit: long segments, some on no boundary at all, boundaries of many short edges or a few long ones."""
+    from DelaunayInfill import routing
+
+    rng = np.random.default_rng(seed)
+    fine = 64 if seed == 0 else 2
+    area = unary_union([star().difference(Point(0, 0).buffer(4, fine)), box(35, -5, 45, 5),
+                        Point(-20, -32).buffer(6, fine)])
+    starts = rng.uniform(-45, 50, (count, 2))
+    ends = starts + rng.normal(0, 6, (count, 2)) * rng.choice([0.1, 1.0, 4.0], (count, 1))
+    segments = np.stack([starts, ends], axis=1)
+    swept, swept_from = clip_segments(segments, area, return_index=True)
+    monkeypatch.setattr(routing, "_MAX_CANDIDATES", 0)  # the sweep gives up: pairs by distance
+    by_distance = clip_segments(segments, area)
+    monkeypatch.setattr(routing, "_BRUTE_FORCE_PAIRS", 10**12)  # every pair
+    every_pair, every_from = clip_segments(segments, area, return_index=True)
+    assert len(every_pair) > 0
+    assert np.array_equal(swept, every_pair) and np.array_equal(swept_from, every_from)
+    assert np.array_equal(by_distance, every_pair)
+    assert clip_segments(segments[:0], area).shape == (0, 2, 2)

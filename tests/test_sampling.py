@@ -253,3 +253,29 @@ def test_greedy_independent_set_with_equal_priorities_ends_and_prefers_lower_ind
     b = np.array([1, 2, 0, 4])  # a triangle 0-1-2 and an edge 3-4
     chosen = greedy_independent_set(5, a, b, np.zeros(5))
     np.testing.assert_array_equal(chosen, [True, False, False, True, False])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize(("n", "m"), [(40, None), (30, 200), (300, None), (150, 400)])
+def test_close_pairs_with_and_without_trees_agree(monkeypatch, seed, n, m):
+    """close_pairs tests few pairs directly, many through k-d trees: the same pairs either way,
+    each within the larger radius of its two points (checked by brute force)."""
+    from DelaunayInfill import sampling
+
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(0, 30, (n, 2))
+    rp = rng.uniform(0.5, 4.0, n)  # three radius classes
+    q, rq = (None, None) if m is None else (rng.uniform(0, 30, (m, 2)), rng.uniform(0.5, 4.0, m))
+    d = np.hypot(*(p[:, None] - (p if q is None else q)[None]).transpose(2, 0, 1))
+    want = d < np.maximum(rp[:, None], (rp if q is None else rq)[None])
+    if q is None:
+        want = np.triu(want, 1)
+    for limit in (0, 10**9):  # trees always / never
+        monkeypatch.setattr(sampling, "_ALL_PAIRS", limit)
+        i, j = close_pairs(p, rp, q, rq)
+        assert len(i) == np.count_nonzero(want)  # each pair once
+        if q is None:  # either order
+            i, j = np.minimum(i, j), np.maximum(i, j)
+        got = np.zeros_like(want)
+        got[i, j] = True
+        assert np.array_equal(got, want)

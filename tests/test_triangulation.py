@@ -74,3 +74,14 @@ def test_relax_points_keeps_points_near_their_area_and_count():
     moved = relax_points(pts, area, lambda xy: np.full(len(xy), 2.0), 3)
     assert moved.shape == pts.shape
     assert (moved >= -1e-9).all() and (moved <= 30 + 1e-9).all()
+
+
+def test_unique_edges_are_the_sorted_distinct_vertex_pairs():
+    pts = np.random.default_rng(5).uniform(0, 10, (500, 2))
+    tri = delaunay_triangles(pts)
+    rows = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    want = np.array(sorted({tuple(r) for r in rows.tolist()}))
+    got = unique_edges(tri)
+    assert got.dtype == np.intp
+    assert np.array_equal(got, want)
+    assert unique_edges(np.zeros((0, 3), dtype=np.intp)).shape == (0, 2)

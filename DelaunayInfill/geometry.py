@@ -12,9 +12,17 @@ import math
 
 import numpy as np
 import shapely
-from shapely.geometry import GeometryCollection, LineString, MultiPolygon, Polygon, box
+from shapely.geometry import (
+    GeometryCollection,
+    LineString,
+    MultiLineString,
+    MultiPoint,
+    MultiPolygon,
+    Polygon,
+    box,
+)
 from shapely.geometry.base import BaseGeometry
-from shapely.ops import unary_union
+from shapely.ops import polygonize, unary_union
 from shapely.validation import make_valid
 
 SHAPELY2 = int(shapely.__version__.split(".")[0]) >= 2
@@ -35,6 +43,10 @@ __all__ = [
     "to_multipolygon",
     "unary_union",
     "box",
+    "convex_hull_of",
+    "multilinestring_of",
+    "points_on_surface",
+    "polygonize_segments",
 ]
 
 
@@ -175,6 +187,45 @@ def regular_polygon(center, radius: float, sides: int, start_angle: float = math
     """A regular polygon (used for round density regions and test shapes)."""
     a = start_angle + np.arange(sides) * 2 * math.pi / sides
     return Polygon(np.c_[center[0] + radius * np.cos(a), center[1] + radius * np.sin(a)])
+
+
+def multilinestring_of(paths) -> MultiLineString:
+    """One MultiLineString of polylines, each an (m, 2) array, m >= 2, mm (vectorized on shapely 2)."""
+    if SHAPELY2:
+        coords = np.concatenate([np.asarray(p, dtype=float) for p in paths])
+        part = np.repeat(np.arange(len(paths)), [len(p) for p in paths])
+        return shapely.multilinestrings(shapely.linestrings(coords, indices=part))
+    return MultiLineString([LineString(p) for p in paths])  # pragma: no cover
+
+
+def polygonize_segments(segments) -> list[Polygon]:
+    """The faces enclosed by segments that meet only at their ends, shape (k, 2, 2) mm (vectorized on shapely 2).
+
+    Every bounded face comes back, a hole's face too (as its own polygon).
+    """
+    segments = np.asarray(segments, dtype=float)
+    if len(segments) == 0:
+        return []
+    if SHAPELY2:
+        return list(shapely.get_parts(shapely.polygonize(shapely.linestrings(segments))))
+    return list(polygonize([LineString(s) for s in segments.tolist()]))  # pragma: no cover
+
+
+def points_on_surface(polygons) -> np.ndarray:
+    """A point inside each polygon, shape (n, 2) mm (vectorized on shapely 2)."""
+    if len(polygons) == 0:
+        return np.zeros((0, 2))
+    if SHAPELY2:
+        return shapely.get_coordinates(shapely.point_on_surface(np.asarray(polygons, dtype=object)))
+    return np.array([p.representative_point().coords[0] for p in polygons], dtype=float)  # pragma: no cover
+
+
+def convex_hull_of(points) -> BaseGeometry:
+    """Convex hull of points, shape (n, 2) mm: a Polygon (a LineString or Point when degenerate)."""
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    if SHAPELY2:
+        return shapely.multipoints(points).convex_hull
+    return MultiPoint(points.tolist()).convex_hull  # pragma: no cover
 
 
 def covers_segments(area, segments: np.ndarray) -> np.ndarray | None:

@@ -1,7 +1,13 @@
 """The speed-ups of the modifier split and the per-layer bookkeeping give what the plain forms give.
 
-* `_OwnerGrid.polygon` (runs merged across rows) covers exactly the cells of its mask;
+* `_OwnerGrid.polygon` / `_OwnerGrid.regions` (the cell borders traced, faces built once) cover
+  exactly the cells of each label and nothing else, as valid polygons;
+* `_inside_lattice` (even-odd along rows) equals shapely's point-in-area test;
 * `_owner_grid` (a bounded nearest-line search first) gives the owners of a full search;
+* `between_lines` (runs of quadrilaterals as one polygon) covers what the union of its quadrilaterals covers;
+* `split_by_line_ends` splits its area into disjoint parts, the host being all the modifiers leave;
+* `infer.nearest_sample_distance` (closed form per segment) equals a tree of all the samples;
+* `median_of`, `_nearest_within` and the geometry helpers equal numpy's / shapely's plain forms;
 * `geometry.distances` equals shapely's distance one geometry at a time;
 * `_has_both_walls` (one set of printed features per layer) equals the mask test;
 * `_Run._fraction_inside` remembers modifiers with as many lines separately.
@@ -15,10 +21,22 @@ import os
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
-from shapely.geometry import Point, box
+from shapely.geometry import LineString, MultiLineString, MultiPoint, Point, Polygon, box
+from shapely.ops import polygonize, unary_union
 
 from DelaunayInfill.gcode import ProcessSettings, process
-from DelaunayInfill.gcode.area import _owner_grid, _OwnerGrid, sample_segments
+from DelaunayInfill.gcode.area import (
+    _inside_lattice,
+    _nearest_within,
+    _owner_grid,
+    _OwnerGrid,
+    between_lines,
+    line_families,
+    median_of,
+    sample_segments,
+    split_by_line_ends,
+)
+from DelaunayInfill.gcode.infer import nearest_sample_distance
 from DelaunayInfill.gcode.read import (
     WALL_INNER,
     WALL_OUTER,
@@ -27,7 +45,14 @@ from DelaunayInfill.gcode.read import (
     as_cura_list,
     parse_layer,
 )
-from DelaunayInfill.geometry import contains_xy, distances
+from DelaunayInfill.geometry import (
+    contains_xy,
+    convex_hull_of,
+    distances,
+    multilinestring_of,
+    points_on_surface,
+    polygonize_segments,
+)
 
 DATA = os.path.join(os.path.dirname(__file__), "..", "DelaunayInfill", "data")
 
@@ -46,6 +71,252 @@ def test_grid_polygon_covers_exactly_the_masked_cells(seed):
     centres = grid.centres().reshape(-1, 2)
     inside = contains_xy(poly, centres[:, 0], centres[:, 1])
     assert np.array_equal(inside, mask.ravel())
+
+
+def _random_mask(rng, rows: int, cols: int) -> np.ndarray:
+    """Noise, a checkerboard with holes (corners where cells touch diagonally) or smooth blobs."""
+    kind = int(rng.integers(3))
+    if kind == 0:
+        return rng.random((rows, cols)) < rng.uniform(0.05, 0.95)
+    if kind == 1:
+        return (np.add.outer(np.arange(rows), np.arange(cols)) % 2 == 0) ^ (rng.random((rows, cols)) < 0.3)
+    yy, xx = np.mgrid[:rows, :cols]
+    return np.sin(xx / rng.uniform(1, 5)) + np.cos(yy / rng.uniform(1, 5)) + rng.normal(0, 0.5, (rows, cols)) > 0
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_traced_mask_polygon_is_valid_and_exact(seed):
+    """Diagonal touches, rings inside rings, cells alone: every masked cell and no other, a valid area."""
+    rng = np.random.default_rng(100 + seed)
+    rows, cols = int(rng.integers(1, 40)), int(rng.integers(1, 40))
+    mask = _random_mask(rng, rows, cols)
+    grid = _OwnerGrid(x0=-3.1, y0=5.3, step=0.37, owner=np.zeros((rows, cols), dtype=np.int64))
+    poly = grid.polygon(mask)
+    assert poly.is_valid
+    assert poly.area == pytest.approx(mask.sum() * 0.37**2, abs=1e-9)
+    centres = grid.centres().reshape(-1, 2)
+    assert np.array_equal(contains_xy(poly, centres[:, 0], centres[:, 1]), mask.ravel())
+    # the plain form: a union of one square per cell
+    x, y = centres[mask.ravel()].T
+    squares = [box(a - 0.185, b - 0.185, a + 0.185, b + 0.185) for a, b in zip(x, y, strict=True)]
+    if squares:
+        assert poly.symmetric_difference(unary_union(squares)).area < 1e-9
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_regions_cover_each_label_and_the_free_cells_exactly(seed):
+    rng = np.random.default_rng(200 + seed)
+    rows, cols, count = int(rng.integers(1, 35)), int(rng.integers(1, 35)), int(rng.integers(1, 6))
+    labels = rng.integers(-1, count, (rows, cols))
+    if seed % 2:  # larger patches of one label, with T-junctions between three labels
+        yy, xx = np.mgrid[:rows, :cols]
+        field = np.sin(xx / rng.uniform(1, 6)) * 2 + np.cos(yy / rng.uniform(1, 6)) * 2 + rng.normal(0, 0.3, (rows, cols))
+        labels = (np.floor(field) % (count + 1)).astype(np.int64) - 1
+    step = 0.37
+    grid = _OwnerGrid(x0=-3.1, y0=5.3, step=step, owner=np.zeros((rows, cols), dtype=np.int64))
+    parts, free = grid.regions(labels, count)
+    centres = grid.centres().reshape(-1, 2)
+    for k in range(count):
+        assert parts[k].is_valid
+        assert parts[k].area == pytest.approx((labels == k).sum() * step**2, abs=1e-9)
+        assert np.array_equal(contains_xy(parts[k], centres[:, 0], centres[:, 1]), (labels == k).ravel())
+    # free: the free cells and one ring of cells round the grid
+    framed = (rows + 2) * (cols + 2) - rows * cols + (labels == -1).sum()
+    assert free.is_valid
+    assert free.area == pytest.approx(framed * step**2, abs=1e-9)
+    assert np.array_equal(contains_xy(free, centres[:, 0], centres[:, 1]), (labels == -1).ravel())
+
+
+@pytest.mark.parametrize("seed", range(25))
+def test_inside_lattice_equals_shapely(seed):
+    rng = np.random.default_rng(300 + seed)
+    area = Point(rng.uniform(-5, 5, 2)).buffer(rng.uniform(2, 20), int(rng.integers(1, 16)))
+    for _ in range(int(rng.integers(0, 4))):  # holes and bites
+        area = area.difference(Point(rng.uniform(-10, 10, 2)).buffer(rng.uniform(0.5, 6)))
+    if seed % 3 == 0:
+        area = area.union(box(*rng.uniform(-20, 0, 2), *rng.uniform(0, 20, 2)))
+    minx, miny, maxx, maxy = area.bounds
+    step = rng.uniform(0.1, 1.0)
+    xs, ys = np.arange(minx - 1 + step / 2, maxx + 1, step), np.arange(miny - 1 + step / 2, maxy + 1, step)
+    gx, gy = np.meshgrid(xs, ys)
+    expected = contains_xy(area, gx.ravel(), gy.ravel()).reshape(gx.shape)
+    assert expected.any() and not expected.all()
+    assert np.array_equal(_inside_lattice(area, xs, ys), expected)
+
+
+@pytest.mark.parametrize("seed", range(25))
+def test_inside_lattice_equals_shapely_on_the_border(seed):
+    """Points exactly on edges: boxes on a 0.1 mm grid (a grid's points fall on their edges) and
+    polygons with corners at lattice points (slanted edges through lattice points): on the border
+    is not inside, as shapely has it."""
+    rng = np.random.default_rng(700 + seed)
+    step = 0.4
+    if seed % 2:
+        area = unary_union([box(x, y, x + w, y + h) for x, y, w, h in np.round(rng.uniform([0, 0, 1, 1], [20, 20, 15, 15], (4, 4)), 1)])
+        area = area.difference(box(*(xy := np.round(rng.uniform(2, 15, 2), 1)), *(xy + [2.2, 1.8])))
+        minx, miny, maxx, maxy = area.bounds
+        xs, ys = np.arange(minx + step / 2, maxx, step), np.arange(miny + step / 2, maxy, step)
+    else:
+        xs = ys = np.arange(0.2, 30, step)
+        corners = np.column_stack([xs[rng.integers(0, len(xs), 6)], ys[rng.integers(0, len(ys), 6)]])
+        area = Polygon(corners).buffer(0) if not Polygon(corners).is_valid else Polygon(corners)
+    gx, gy = np.meshgrid(xs, ys)
+    expected = contains_xy(area, gx.ravel(), gy.ravel()).reshape(gx.shape)
+    assert np.array_equal(_inside_lattice(area, xs, ys), expected)
+
+
+def _between_lines_plain(fill: np.ndarray, max_gap_factor: float = 1.6):
+    """The quadrilateral of every facing pair of pieces on neighbouring lines, one by one, united."""
+    quads = []
+    for theta, member in line_families(fill):
+        u = np.array([np.cos(theta), np.sin(theta)])
+        n = np.array([-u[1], u[0]])
+        seg = fill[member]
+        offset = 0.5 * (seg[:, 0] + seg[:, 1]) @ n
+        lo, hi = (seg @ u).min(axis=1), (seg @ u).max(axis=1)
+        order = np.lexsort((lo, offset))
+        offset, lo, hi = offset[order], lo[order], hi[order]
+        line = np.cumsum(np.r_[True, np.diff(offset) > 0.05]) - 1
+        line_off = np.array([offset[line == i][0] for i in range(line[-1] + 1)])
+        if len(line_off) < 2:
+            continue
+        spacing = np.median(np.diff(line_off))
+        for i in range(len(line_off) - 1):
+            if line_off[i + 1] - line_off[i] > max_gap_factor * spacing:
+                continue
+            for a in np.flatnonzero(line == i):
+                for b in np.flatnonzero(line == i + 1):
+                    if lo[a] < hi[b] and lo[b] < hi[a]:
+                        quads.append(Polygon([lo[a] * u + line_off[i] * n, hi[a] * u + line_off[i] * n,
+                                              hi[b] * u + line_off[i + 1] * n, lo[b] * u + line_off[i + 1] * n]))
+    return unary_union(quads) if quads else None
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_between_lines_equals_the_union_of_its_quadrilaterals(seed):
+    """Lines of one piece (joined into runs), of two pieces, missing lines, short pieces."""
+    rng = np.random.default_rng(400 + seed)
+    segments = []
+    for angle in rng.choice([0.0, 45.0, 60.0, 90.0, 135.0], size=int(rng.integers(1, 4)), replace=False):
+        t = np.radians(angle + rng.normal(0, 0.5))
+        u, n = np.array([np.cos(t), np.sin(t)]), np.array([-np.sin(t), np.cos(t)])
+        spacing = rng.uniform(0.5, 3.0)
+        for k in range(int(rng.integers(2, 12))):
+            if rng.random() < 0.1:
+                continue
+            lo, hi = rng.uniform(-10, 0), rng.uniform(0.01, 10)
+            pieces = [(lo, hi)]
+            if rng.random() < 0.3:
+                mid, gap = rng.uniform(lo, hi), rng.uniform(0, 2)
+                pieces = [(lo, mid), (mid + gap, hi + gap)]
+            segments += [[a * u + k * spacing * n, b * u + k * spacing * n] for a, b in pieces]
+    fill = np.array(segments)
+    got, expected = between_lines(fill), _between_lines_plain(fill)
+    assert (got is None) == (expected is None)
+    if got is not None:
+        assert got.is_valid
+        assert got.symmetric_difference(expected).area < 1e-9
+
+
+def _layout(seed: int):
+    """A host area with two to four box modifiers, each with grid lines of its own spacing."""
+    rng = np.random.default_rng(500 + seed)
+    area = Polygon([(0, 0), (60, 0), (60, 40), (30, 55), (0, 40)])
+    boxes = [box(*(xy := rng.uniform([2, 2], [40, 30])), *(xy + rng.uniform(8, 18, 2))) for _ in range(int(rng.integers(2, 5)))]
+    spacings = [2.0] + [float(rng.uniform(0.8, 4.0)) for _ in boxes]
+    host_region = area.buffer(-0.16).difference(unary_union(boxes))
+    fills = [_grid_fill(host_region, spacings[0], 0.3)]
+    fills += [_grid_fill(b.intersection(area).buffer(-0.16, join_style=2), s, float(rng.uniform(0, 1)))
+              for b, s in zip(boxes, spacings[1:], strict=True)]
+    return area, fills, spacings
+
+
+def _grid_fill(region, spacing: float, phase: float) -> np.ndarray:
+    """Lines at 45 and 135 degrees `spacing` apart clipped to `region`, shape (k, 2, 2)."""
+    minx, miny, maxx, maxy = region.bounds
+    centre, reach = np.array([(minx + maxx) / 2, (miny + maxy) / 2]), np.hypot(maxx - minx, maxy - miny)
+    out = []
+    for angle in (45.0, 135.0):
+        u = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
+        n = np.array([-u[1], u[0]])
+        for off in np.arange(-reach, reach, spacing) + phase:
+            piece = LineString([centre + off * n - reach * u, centre + off * n + reach * u]).intersection(region)
+            for line in getattr(piece, "geoms", [piece]):
+                if not line.is_empty and line.length > 1e-6:
+                    coords = np.asarray(line.coords)
+                    out.extend(np.stack([coords[:-1], coords[1:]], axis=1))
+    return np.array(out).reshape(-1, 2, 2)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_split_by_line_ends_is_a_partition_of_the_area(seed):
+    area, fills, spacings = _layout(seed)
+    parts = split_by_line_ends(area, fills, spacings, 0.16, step=0.4)
+    assert len(parts) == len(fills)
+    assert all(p.is_valid for p in parts)
+    assert sum(p.area for p in parts) == pytest.approx(area.area, abs=1e-6)
+    for i, a in enumerate(parts):
+        assert a.difference(area).area < 1e-9
+        for b in parts[i + 1 :]:
+            assert a.intersection(b).area < 1e-9
+    # the host is what the modifiers leave (the plain form of its last step)
+    assert parts[0].symmetric_difference(area.difference(unary_union(parts[1:]))).area < 1e-9
+    assert all(not p.is_empty for p in parts[1:])
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_nearest_sample_distance_equals_a_tree_of_all_samples(seed):
+    rng = np.random.default_rng(600 + seed)
+    segments = rng.uniform(-20, 20, (int(rng.integers(1, 40)), 2, 2))
+    if seed % 5 == 0:
+        segments[0, 1] = segments[0, 0]  # a point
+    if seed % 7 == 0:
+        segments = np.round(segments, 1)
+    step = float(rng.choice([0.02, 0.1, 0.5, 2.0]))
+    pts = rng.uniform(-25, 25, (int(rng.integers(1, 300)), 2))
+    if seed % 3 == 0:  # points close to the segments
+        near = sample_segments(segments, 0.37)
+        pts = near + rng.normal(0, 0.4, near.shape)
+    expected = cKDTree(sample_segments(segments, step)).query(pts, distance_upper_bound=3.0)[0]
+    got = nearest_sample_distance(segments, step, pts, 3.0)
+    assert np.isfinite(expected).any()
+    assert np.array_equal(got, expected)
+
+
+def test_median_of_equals_numpy():
+    rng = np.random.default_rng(7)
+    for size in range(1, 40):
+        values = np.round(rng.normal(size=size), int(rng.integers(0, 3)))
+        assert median_of(values) == float(np.median(values))
+
+
+def test_nearest_within_equals_argmin_of_all_distances():
+    rng = np.random.default_rng(8)
+    pieces = [box(*xy, *(xy + rng.uniform(0.1, 1.5, 2))) for xy in rng.uniform(-10, 10, (60, 2))]
+    targets = [Point(rng.uniform(-8, 8, 2)).buffer(rng.uniform(1, 4)) for _ in range(5)]
+    targets.insert(2, Polygon())  # an empty target is never nearest
+    limit = 0.8
+    dist = np.array([[p.distance(t) if not t.is_empty else np.inf for p in pieces] for t in targets])
+    best = np.argmin(dist, axis=0)
+    expected = np.where(dist[best, np.arange(len(pieces))] <= limit, best, -1)
+    got = _nearest_within(pieces, targets, limit)
+    assert np.array_equal(got, expected)
+    assert (got >= 0).any() and (got < 0).any()
+
+
+def test_geometry_helpers_equal_shapely():
+    rng = np.random.default_rng(9)
+    paths = [rng.uniform(-5, 5, (int(rng.integers(2, 6)), 2)) for _ in range(7)]
+    assert multilinestring_of(paths).equals_exact(MultiLineString([LineString(p) for p in paths]), 0)
+    points = rng.uniform(-5, 5, (30, 2))
+    assert convex_hull_of(points).equals(MultiPoint([tuple(p) for p in points]).convex_hull)
+    # the unit edges of a 3 x 3 grid of squares (they meet only at their ends): nine faces
+    edges = [[(x, y), (x + 1, y)] for x in range(3) for y in range(4)] + [[(x, y), (x, y + 1)] for x in range(4) for y in range(3)]
+    faces = polygonize_segments(np.array(edges, dtype=float))
+    assert len(faces) == len(list(polygonize([LineString(e) for e in edges]))) == 9
+    assert sum(f.area for f in faces) == pytest.approx(9.0)
+    inside = points_on_surface(faces)
+    assert all(f.contains(Point(p)) for f, p in zip(faces, inside, strict=True))
 
 
 @pytest.mark.parametrize("seed", range(8))

@@ -17,14 +17,18 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
-from shapely.geometry import LineString, MultiLineString, MultiPoint, Polygon
+from shapely.geometry import MultiPolygon, Polygon
 from shapely.validation import make_valid
 
 from ..geometry import (
     boundary_segments,
     contains_xy,
+    convex_hull_of,
     distances,
     empty_area,
+    multilinestring_of,
+    points_on_surface,
+    polygonize_segments,
     polygons_from,
     polygons_of,
     to_multipolygon,
@@ -124,7 +128,7 @@ def _buffer_runs(runs: list[np.ndarray], radius: float):
     lines = [r for r in runs if len(r) >= 2]
     if not lines:
         return empty_area()
-    return to_multipolygon(MultiLineString([LineString(r) for r in lines]).buffer(radius, 4))
+    return to_multipolygon(multilinestring_of(lines).buffer(radius, 4))
 
 
 def sample_segments(segments: np.ndarray, step: float) -> np.ndarray:
@@ -193,12 +197,16 @@ class _OwnerGrid:
     step: float
     owner: np.ndarray
 
-    def at(self, pts: np.ndarray) -> np.ndarray:
-        """Owner at points (p, 2); -1 outside the grid or the area."""
+    def _cells(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Row and column of the cell under each point (p, 2), and whether it lies on the grid."""
         j = np.floor((pts[:, 0] - self.x0) / self.step).astype(np.int64)
         i = np.floor((pts[:, 1] - self.y0) / self.step).astype(np.int64)
         rows, cols = self.owner.shape
-        ok = (i >= 0) & (i < rows) & (j >= 0) & (j < cols)
+        return i, j, (i >= 0) & (i < rows) & (j >= 0) & (j < cols)
+
+    def at(self, pts: np.ndarray) -> np.ndarray:
+        """Owner at points (p, 2); -1 outside the grid or the area."""
+        i, j, ok = self._cells(pts)
         out = np.full(len(pts), -1, dtype=np.int64)
         out[ok] = self.owner[i[ok], j[ok]]
         return out
@@ -209,25 +217,132 @@ class _OwnerGrid:
         gx, gy = np.meshgrid(self.x0 + (np.arange(cols) + 0.5) * self.step, self.y0 + (np.arange(rows) + 0.5) * self.step)
         return np.stack([gx, gy], axis=-1)
 
+    def inside(self, geometry) -> np.ndarray:
+        """Whether each cell's centre lies inside `geometry`, shape (rows, cols); only its bounding box is tested."""
+        rows, cols = self.owner.shape
+        out = np.zeros((rows, cols), dtype=bool)
+        if geometry.is_empty:
+            return out
+        minx, miny, maxx, maxy = geometry.bounds
+        j0 = max(0, int(np.floor((minx - self.x0) / self.step)) - 1)
+        j1 = min(cols, int(np.ceil((maxx - self.x0) / self.step)) + 1)
+        i0 = max(0, int(np.floor((miny - self.y0) / self.step)) - 1)
+        i1 = min(rows, int(np.ceil((maxy - self.y0) / self.step)) + 1)
+        if j0 >= j1 or i0 >= i1:
+            return out
+        out[i0:i1, j0:j1] = _inside_lattice(geometry, self.x0 + (np.arange(j0, j1) + 0.5) * self.step,
+                                            self.y0 + (np.arange(i0, i1) + 0.5) * self.step)
+        return out
+
     def polygon(self, mask: np.ndarray):
-        """The cells where `mask` (rows, cols) holds, as one area: a rectangle per run of cells along a row."""
-        runs = np.diff(np.pad(mask, ((0, 0), (1, 1))).astype(np.int8), axis=1)
-        rows, first = np.nonzero(runs == 1)
-        _, stop = np.nonzero(runs == -1)  # row-major order: the i-th stop ends the i-th run
-        if len(rows) == 0:
+        """The cells where `mask` (rows, cols) holds, as one area (exactly those cells, corners on the grid)."""
+        if not mask.any():
             return empty_area()
-        # Runs with the same columns in consecutive rows make one taller rectangle: the same
-        # cells, far fewer polygons for the union.
-        order = np.lexsort((rows, stop, first))
-        rows, first, stop = rows[order], first[order], stop[order]
-        new = np.r_[True, (first[1:] != first[:-1]) | (stop[1:] != stop[:-1]) | (rows[1:] != rows[:-1] + 1)]
-        top = np.r_[rows[np.flatnonzero(new)[1:] - 1], rows[-1]]  # each rectangle's last row
-        rows, first, stop = rows[new], first[new], stop[new]
-        x0, x1 = self.x0 + first * self.step, self.x0 + stop * self.step
-        y0, y1 = self.y0 + rows * self.step, self.y0 + (top + 1) * self.step
-        corners = np.stack([np.stack([x0, y0], axis=1), np.stack([x1, y0], axis=1),
-                            np.stack([x1, y1], axis=1), np.stack([x0, y1], axis=1)], axis=1)
-        return to_multipolygon(unary_union(polygons_from(corners)))
+        return self.regions(np.where(mask, 0, -1), 1)[0][0]
+
+    def regions(self, labels: np.ndarray, count: int) -> tuple[list, object]:
+        """The cells of each label as one area each, and the free cells' area, in one pass.
+
+        The borders between cells of different labels are traced on the grid
+        lines (straight runs merged, broken where more than two border edges
+        meet) inside a frame one cell beyond the grid, and their faces are
+        built once; each face is the cells of one label.  Far cheaper than a
+        union of rectangles per label.
+
+        Parameters
+        ----------
+        labels : ndarray of int, shape (rows, cols)
+            Label per cell, 0 .. count - 1, or -1 for a free cell.
+        count : int
+
+        Returns
+        -------
+        parts : list of MultiPolygon
+            One per label (empty where it has no cell), mm.
+        free : MultiPolygon
+            The free cells and the ring of cells round the grid (the frame).
+        """
+        rows, cols = labels.shape
+        cell = np.pad(labels, 1, constant_values=-1)  # cell[i + 1, j + 1] is labels[i, j]
+        across = cell[1:, :] != cell[:-1, :]  # border edges on horizontal grid lines (rows + 1, cols + 2)
+        along = cell[:, 1:] != cell[:, :-1]  # border edges on vertical grid lines (rows + 2, cols + 1)
+        # Border edges meeting at each grid corner (rows + 1, cols + 1): a straight run goes on only
+        # through a corner where it is alone.
+        meeting = (across[:, :-1].astype(np.int8) + across[:, 1:] + along[:-1, :] + along[1:, :])
+        single = meeting == 2
+        segments = []
+        for axis, (edge, through) in enumerate(((across, single), (along.T, single.T))):
+            joined = np.zeros_like(edge)
+            joined[:, 1:] = edge[:, 1:] & edge[:, :-1] & through
+            goes_on = np.zeros_like(edge)
+            goes_on[:, :-1] = joined[:, 1:]
+            line, first = np.nonzero(edge & ~joined)
+            _, last = np.nonzero(edge & ~goes_on)  # row-major: the i-th end closes the i-th run
+            # grid-corner indices (x, y) of the run's ends; the padded first column/row is index -1
+            ends = np.stack([np.stack([first - 1, line], axis=1), np.stack([last, line], axis=1)], axis=1)
+            segments.append(ends if axis == 0 else ends[..., ::-1])
+        frame = np.array([[-1, -1], [cols + 1, -1], [cols + 1, rows + 1], [-1, rows + 1]])
+        segments.append(np.stack([frame, np.roll(frame, -1, axis=0)], axis=1))
+        corners = np.concatenate(segments)
+        xy = np.empty(corners.shape)
+        xy[..., 0] = self.x0 + corners[..., 0] * self.step
+        xy[..., 1] = self.y0 + corners[..., 1] * self.step
+        faces = polygonize_segments(xy)
+        # Each face holds the cells of one label: a point inside it tells which.
+        i, j, ok = self._cells(points_on_surface(faces))
+        face_label = np.full(len(faces), -1, dtype=np.int64)
+        face_label[ok] = labels[i[ok], j[ok]]
+        groups: list[list] = [[] for _ in range(count + 1)]  # the last: free
+        for face, label in zip(faces, face_label.tolist(), strict=True):
+            groups[label].append(face)
+        return [MultiPolygon(g) for g in groups[:-1]], MultiPolygon(groups[-1])
+
+
+def _inside_lattice(area, xs: np.ndarray, ys: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """Whether each lattice point (xs[j], ys[i]) lies inside `area`, shape (len(ys), len(xs)).
+
+    Even-odd rule along each row of points: the border's edges are cut by
+    every row they span (half-open in y) and a point is inside when an odd
+    number of cuts lie left of it.  The few points within `tol` of a cut, a
+    horizontal edge or a corner (where rounding could tip the count, and a
+    grid's points can fall on a box's edges) are tested by shapely, so the
+    answer is shapely's point-in-area test.  `xs`, `ys` increasing, mm.
+    """
+    inside = np.zeros((len(ys), len(xs)), dtype=bool)
+    edges = boundary_segments(area)
+    if len(edges) == 0 or len(xs) == 0 or len(ys) == 0:
+        return inside
+    (xa, ya), (xb, yb) = edges[:, 0].T, edges[:, 1].T
+    first = np.searchsorted(ys, np.minimum(ya, yb), side="left")  # rows with min(ya, yb) <= y < max(ya, yb)
+    count = np.searchsorted(ys, np.maximum(ya, yb), side="left") - first
+    edge = np.repeat(np.arange(len(edges)), count)
+    row = np.repeat(first, count) + np.arange(edge.size) - np.repeat(np.cumsum(count) - count, count)
+    y = ys[row]
+    x = xa[edge] + (y - ya[edge]) * (xb[edge] - xa[edge]) / (yb[edge] - ya[edge])
+    col = np.searchsorted(xs, x, side="right")  # the first point right of the cut
+    flips = np.bincount(row * (len(xs) + 1) + col, minlength=len(ys) * (len(xs) + 1)).reshape(len(ys), len(xs) + 1)
+    inside = (np.cumsum(flips[:, :-1], axis=1) & 1).astype(bool)
+    # Points the count cannot settle: next to a cut, or on a row through a horizontal edge or a corner.
+    unsure = np.zeros((len(ys), len(xs) + 1), dtype=np.int64)
+    for side in (col - 1, col):
+        close = (side >= 0) & (side < len(xs))
+        close[close] = np.abs(xs[side[close]] - x[close]) <= tol
+        unsure[row[close], side[close]] += 1
+        unsure[row[close], side[close] + 1] -= 1
+    level = np.r_[ya[ya == yb], ya]  # horizontal edges, then every corner
+    lo = np.r_[np.minimum(xa, xb)[ya == yb], xa]
+    hi = np.r_[np.maximum(xa, xb)[ya == yb], xa]
+    rows_from = np.searchsorted(ys, level - tol, side="left")
+    rows_to = np.searchsorted(ys, level + tol, side="right")
+    for offset in range(int((rows_to - rows_from).max(initial=0))):  # rows within tol of a level: at most a few
+        on = rows_from + offset < rows_to
+        r = rows_from[on] + offset
+        np.add.at(unsure, (r, np.searchsorted(xs, lo[on] - tol, side="left")), 1)
+        np.add.at(unsure, (r, np.searchsorted(xs, hi[on] + tol, side="right")), -1)
+    check_row, check_col = np.nonzero(np.cumsum(unsure[:, :-1], axis=1) > 0)
+    if check_row.size:
+        inside[check_row, check_col] = contains_xy(area, xs[check_col], ys[check_row])
+    return inside
 
 
 def _owner_grid(area, fills: list[np.ndarray], spacings: list[float], step: float) -> _OwnerGrid | None:
@@ -236,21 +351,26 @@ def _owner_grid(area, fills: list[np.ndarray], spacings: list[float], step: floa
         return None
     minx, miny, maxx, maxy = area.bounds
     step = max(step, np.sqrt((maxx - minx) * (maxy - miny) / 60000.0))
-    gx, gy = np.meshgrid(np.arange(minx + step / 2, maxx, step), np.arange(miny + step / 2, maxy, step))
-    pts = np.column_stack([gx.ravel(), gy.ravel()])
-    inside = contains_xy(area, pts[:, 0], pts[:, 1])
-    grid = np.full(gx.shape, -1, dtype=np.int64)
-    pts = pts[inside]
+    xs, ys = np.arange(minx + step / 2, maxx, step), np.arange(miny + step / 2, maxy, step)
+    inside = _inside_lattice(area, xs, ys).ravel()
+    grid = np.full((len(ys), len(xs)), -1, dtype=np.int64)
+    rows, cols = np.divmod(np.flatnonzero(inside), len(xs))
+    pts = np.column_stack([xs[cols], ys[rows]])
     if len(pts):
         # Distances in line spacings.  A first pass looks no further than `bound` spacings (far
         # cheaper); only where no mesh's lines are that near are all distances measured in full.
         # Nearer than the bound beats anything beyond it, so the owners are those of a full search.
         bound = 1.0
         dist = np.full((len(fills), len(pts)), np.inf)
-        trees = [cKDTree(sample_segments(fill, step / 2)) if len(fill) else None for fill in fills]
+        samples = [sample_segments(fill, step / 2) for fill in fills]
+        trees = [cKDTree(s) if len(s) else None for s in samples]
         for k, (tree, spacing) in enumerate(zip(trees, spacings, strict=True)):
             if tree is not None:
-                dist[k] = tree.query(pts, distance_upper_bound=bound * spacing)[0] / spacing
+                # Points beyond the bound from the lines' bounding box are beyond it from the lines.
+                reach = bound * spacing
+                lo, hi = samples[k].min(axis=0) - reach, samples[k].max(axis=0) + reach
+                near = np.flatnonzero((pts[:, 0] >= lo[0]) & (pts[:, 0] <= hi[0]) & (pts[:, 1] >= lo[1]) & (pts[:, 1] <= hi[1]))
+                dist[k, near] = tree.query(pts[near], distance_upper_bound=reach)[0] / spacing
         far = ~(dist.min(axis=0) < 0.99 * bound)  # 0.99: clear of rounding at the bound
         if far.any():
             for k, (tree, spacing) in enumerate(zip(trees, spacings, strict=True)):
@@ -285,8 +405,8 @@ def split_by_lines(area, fills: list[np.ndarray], spacings: list[float], step: f
     grid = _owner_grid(area, fills, spacings, step)
     if grid is None:
         return [empty_area() for _ in fills]
-    return [to_multipolygon(grid.polygon(grid.owner == k).intersection(area)) if (grid.owner == k).any()
-            else empty_area() for k in range(len(fills))]
+    parts, _ = grid.regions(grid.owner, len(fills))
+    return [to_multipolygon(p.intersection(area)) if not p.is_empty else empty_area() for p in parts]
 
 
 def direction_peaks(fill: np.ndarray, min_share: float = 0.12):
@@ -316,10 +436,22 @@ def direction_peaks(fill: np.ndarray, min_share: float = 0.12):
     bins = np.round(angle / 2.0).astype(int) % 90
     weight = np.bincount(bins, weights=length, minlength=90)
     total = float(weight.sum())
-    # A direction can straddle two 2-degree bins: smooth, then take local maxima as families.
-    smooth = weight + np.roll(weight, 1) + np.roll(weight, -1)
-    peak = (smooth > min_share * total) & (smooth >= np.roll(smooth, 1)) & (smooth > np.roll(smooth, -1))
+    # A direction can straddle two 2-degree bins: smooth, then take local maxima as families
+    # (neighbours round the circle of bins by padding; np.roll costs more on 90 bins).
+    around = np.concatenate((weight[-1:], weight, weight[:1]))
+    smooth = around[1:-1] + around[:-2] + around[2:]
+    around = np.concatenate((smooth[-1:], smooth, smooth[:1]))
+    peak = (smooth > min_share * total) & (smooth >= around[:-2]) & (smooth > around[2:])
     return length, angle, np.flatnonzero(peak), total
+
+
+def median_of(values: np.ndarray) -> float:
+    """Median of a 1-d array, as ``np.median`` gives it (a plain sort: far less overhead on a few values)."""
+    ordered = np.sort(values)
+    half = len(ordered) // 2
+    if len(ordered) % 2:
+        return float(ordered[half])
+    return float((ordered[half - 1] + ordered[half]) / 2.0)
 
 
 def line_families(fill: np.ndarray, min_share: float = 0.12, max_families: int = 4) -> list[tuple[float, np.ndarray]]:
@@ -396,35 +528,51 @@ def between_lines(fill: np.ndarray, max_gap_factor: float = 1.6):
         order = np.lexsort((lo, offset))
         offset, lo, hi = offset[order], lo[order], hi[order]
         # Pieces on one line share its offset (within 0.05 mm).
-        new_line = np.r_[True, np.diff(offset) > 0.05]
-        line_id = np.cumsum(new_line) - 1
+        new_line = np.ones(len(offset), dtype=bool)
+        new_line[1:] = np.diff(offset) > 0.05
         line_off = offset[new_line]
         if len(line_off) < 2:
             continue
         gaps = np.diff(line_off)
-        spacing = float(np.median(gaps))
+        spacing = median_of(gaps)
         starts = np.flatnonzero(new_line)
-        stops = np.r_[starts[1:], len(offset)]
-        for k in np.flatnonzero(gaps <= max_gap_factor * spacing):
-            a = slice(starts[k], stops[k])
-            b = slice(starts[k + 1], stops[k + 1])
-            # Pieces of the two lines whose along-ranges overlap face each other.
-            pair = (lo[a][:, None] < hi[b][None, :]) & (lo[b][None, :] < hi[a][:, None])
-            ia, ib = np.nonzero(pair)
-            if ia.size == 0:
-                continue
-            la, ha = lo[a][ia], hi[a][ia]
-            lb, hb = lo[b][ib], hi[b][ib]
-            oa, ob = line_off[k], line_off[k + 1]
-            corners = np.stack([
-                np.outer(la, u) + oa * n, np.outer(ha, u) + oa * n,
-                np.outer(hb, u) + ob * n, np.outer(lb, u) + ob * n,
-            ], axis=1)
-            quads.extend(polygons_from(corners))
-        del line_id
+        counts = np.diff(starts, append=len(offset))
+        # Every pair of pieces on neighbouring lines (close enough), line by line, row-major within a pair of lines.
+        pairs = np.flatnonzero(gaps <= max_gap_factor * spacing)
+        per_pair = counts[pairs] * counts[pairs + 1]
+        line = np.repeat(pairs, per_pair)
+        rank = np.arange(per_pair.sum()) - np.repeat(np.cumsum(per_pair) - per_pair, per_pair)
+        ia = starts[line] + rank // counts[line + 1]
+        ib = starts[line + 1] + rank % counts[line + 1]
+        # Pieces of the two lines whose along-ranges overlap face each other.
+        facing = (lo[ia] < hi[ib]) & (lo[ib] < hi[ia])
+        ia, ib, line = ia[facing], ib[facing], line[facing]
+        if ia.size == 0:
+            continue
+        # Where neighbouring lines are one piece each, consecutive quadrilaterals share a whole
+        # side: a run of them is one polygon, up one end of the lines and down the other.
+        single = (counts[line] == 1) & (counts[line + 1] == 1) & (hi[ia] - lo[ia] > 1e-9) & (hi[ib] - lo[ib] > 1e-9)
+        chained = line[single]
+        bounds = np.flatnonzero(np.diff(chained, prepend=-2, append=-2) != 1)  # where runs of lines start
+        for first, stop in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
+            lines = np.arange(chained[first], chained[stop - 1] + 2)  # the run's lines, in order
+            at = starts[lines]
+            up = lo[at][:, None] * u + line_off[lines][:, None] * n
+            down = hi[at][:, None] * u + line_off[lines][:, None] * n
+            quads.append(Polygon(np.concatenate([up[:1], down, up[:0:-1]])))
+        ia, ib, line = ia[~single], ib[~single], line[~single]
+        if ia.size == 0:
+            continue
+        oa, ob = line_off[line][:, None], line_off[line + 1][:, None]
+        corners = np.stack([
+            lo[ia][:, None] * u + oa * n, hi[ia][:, None] * u + oa * n,
+            hi[ib][:, None] * u + ob * n, lo[ib][:, None] * u + ob * n,
+        ], axis=1)
+        quads.extend(polygons_from(corners))
     if not quads:
         return None
-    return to_multipolygon(unary_union(quads))
+    # two pieces (one run per family, the usual case): a plain union is cheaper than a cascaded one
+    return to_multipolygon(quads[0].union(quads[1]) if len(quads) == 2 else unary_union(quads))
 
 
 def _distance_to(area, pts: np.ndarray, step: float = 0.1) -> np.ndarray:
@@ -538,56 +686,87 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
                      for sp in spans[1:]]
     ends = _border_ends(fills, grid, owns, area, end_inset, probe=max(4 * end_inset, 2 * step),
                         reach=list(spacings))
-    centres = grid.centres()
-    inside_span = [None if sp is None else contains_xy(sp, centres[..., 0].ravel(), centres[..., 1].ravel()).reshape(grid.owner.shape)
-                   for sp in spans]
-    children = []
+    inside_span = [None if sp is None else grid.inside(sp) for sp in spans]
+    # Per modifier the grid cells it takes (all its nearest-line part when its lines form no
+    # families, else the rest of it: where no other mesh's lines span) and its own part.
+    labels = np.full(grid.owner.shape, -1, dtype=np.int64)
+    held: list = [None] * len(fills)
     for k in range(1, len(fills)):
         own = owns[k]
         mine = grid.owner == k
-        if own is None or own.is_empty:
-            children.append(to_multipolygon(grid.polygon(mine).intersection(area)) if mine.any() else empty_area())
-            continue
-        # The rest of the nearest-line part: where no other mesh's lines span.
-        for j, covered in enumerate(inside_span):
-            if j != k and covered is not None:
-                mine = mine & ~covered
-        rest = grid.polygon(mine) if mine.any() else empty_area()
-        corners = np.concatenate([np.concatenate([np.asarray(p.exterior.coords) for p in polygons_of(own)]), ends[k]])
-        hull = MultiPoint(corners.tolist()).convex_hull.intersection(area)
-        if own.area >= convex_fill * hull.area:
-            own = hull
-        children.append(to_multipolygon(unary_union([own, rest]).intersection(area)))
-    # Later modifiers win where they overlap.
-    claimed = None
-    for k in range(len(children) - 1, -1, -1):
-        part = children[k]
-        if claimed is not None:
-            part = to_multipolygon(part.difference(claimed))
-        claimed = children[k] if claimed is None else unary_union([claimed, children[k]])
-        children[k] = part
-    if claimed is None:
-        return [to_multipolygon(area), *children]
-    host = to_multipolygon(area.difference(claimed))
+        if own is not None and not own.is_empty:
+            for j, covered in enumerate(inside_span):
+                if j != k and covered is not None:
+                    mine = mine & ~covered
+            corners = np.concatenate([np.concatenate([np.asarray(p.exterior.coords) for p in polygons_of(own)]), ends[k]])
+            hull = convex_hull_of(corners).intersection(area)
+            held[k] = hull if own.area >= convex_fill * hull.area else own
+        labels[mine] = k
+    taken = labels >= 0
+    rests, free = grid.regions(labels, len(fills)) if taken.any() else ([empty_area()] * len(fills), None)
+    children = []
+    for k in range(1, len(fills)):
+        if held[k] is None:
+            children.append(to_multipolygon(rests[k].intersection(area)) if not rests[k].is_empty else empty_area())
+        else:
+            children.append(to_multipolygon(held[k].union(rests[k]).intersection(area)))
+    # Later modifiers win where they overlap: each loses what later ones whose boxes meet its box hold.
+    claimed = list(children)
+    for k, part in enumerate(children):
+        for later in children[k + 1:]:
+            if not part.is_empty and not later.is_empty and _boxes_meet(part.bounds, later.bounds):
+                part = part.difference(later)
+        claimed[k] = to_multipolygon(part)
+    # The host keeps what no modifier holds.  Every modifier is (its own part + its cells) inside
+    # `area`, so that is `area` less the own parts, in the free cells: no union of the modifiers'
+    # staircase borders.
+    own_parts = [h for h in held if h is not None]
+    host = to_multipolygon(area.difference(unary_union(own_parts))) if own_parts else to_multipolygon(area)
+    if free is not None:
+        host = to_multipolygon(host.intersection(free))
+    children = claimed
     # Strips of the host narrower than its line spacing left between modifiers are
     # estimation slivers, not a zone the host's density could fill: the nearest modifier takes each.
     width = 0.5 * spacings[0]
     core = to_multipolygon(host.buffer(-width, 4).buffer(width, 4).intersection(host))
-    slivers = [p for p in polygons_of(host.difference(core)) if p.area > 1e-9]
+    slivers = [p for p in polygons_of(host.difference(core) if not core.is_empty else host) if p.area > 1e-9]
     if slivers and any(not c.is_empty for c in children):
-        grown = [[] for _ in children]
-        # (children, slivers): every sliver's distance to every modifier at once
-        dist = np.array([distances(slivers, c) if not c.is_empty else np.full(len(slivers), np.inf) for c in children])
-        nearest = np.argmin(dist, axis=0)
-        near = dist[nearest, np.arange(len(slivers))] <= 1e-6 + 0.1 * width
-        for piece, k, ok in zip(slivers, nearest.tolist(), near.tolist(), strict=True):
-            if ok:
-                grown[k].append(piece)
-        for k, extra in enumerate(grown):
+        owner = _nearest_within(slivers, children, 1e-6 + 0.1 * width)
+        for k, child in enumerate(children):
+            extra = [piece for piece, o in zip(slivers, owner.tolist(), strict=True) if o == k]
             if extra:
-                children[k] = to_multipolygon(unary_union([children[k], *extra]))
-        host = to_multipolygon(area.difference(unary_union(children)))
+                # the slivers are disjoint pieces of the host: one union with all of them at once
+                children[k] = to_multipolygon(child.union(MultiPolygon(extra)))
+        # What the modifiers did not take stays the host's.
+        kept = [piece for piece, o in zip(slivers, owner.tolist(), strict=True) if o < 0]
+        host = to_multipolygon(unary_union([core, *kept])) if kept else core
     return [host, *children]
+
+
+def _boxes_meet(a: tuple, b: tuple) -> bool:
+    """Whether two bounding boxes (minx, miny, maxx, maxy) overlap or touch."""
+    return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
+
+
+def _nearest_within(pieces: list, targets: list, limit: float) -> np.ndarray:
+    """Index of the target nearest to each piece when within `limit` mm, else -1; shape (n,).
+
+    Only pairs whose bounding boxes lie within `limit` are measured (the
+    rest are farther); ties go to the first target, as with ``argmin``.
+    """
+    box_of = np.array([p.bounds for p in pieces]).reshape(-1, 4)
+    dist = np.full((len(targets), len(pieces)), np.inf)
+    for k, target in enumerate(targets):
+        if target.is_empty:
+            continue
+        tx0, ty0, tx1, ty1 = target.bounds
+        gap_x = np.maximum(0.0, np.maximum(tx0 - box_of[:, 2], box_of[:, 0] - tx1))
+        gap_y = np.maximum(0.0, np.maximum(ty0 - box_of[:, 3], box_of[:, 1] - ty1))
+        close = np.flatnonzero(np.hypot(gap_x, gap_y) <= limit)
+        if close.size:
+            dist[k, close] = distances([pieces[i] for i in close.tolist()], target)
+    nearest = np.argmin(dist, axis=0)
+    return np.where(dist[nearest, np.arange(len(pieces))] <= limit, nearest, -1)
 
 
 class AreaCache:

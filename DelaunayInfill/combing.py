@@ -38,21 +38,35 @@ def segments_inside(starts: np.ndarray, ends: np.ndarray, area) -> np.ndarray:
     """
     starts = np.asarray(starts, dtype=float).reshape(-1, 2)
     ends = np.asarray(ends, dtype=float).reshape(-1, 2)
-    result = np.zeros(len(starts), dtype=bool)
+    if area is None or len(starts) == 0 or area.is_empty:
+        return np.zeros(len(starts), dtype=bool)
     known = np.isfinite(starts).all(axis=1) & np.isfinite(ends).all(axis=1)
-    if area is None or area.is_empty or not known.any():
-        return result
-    segments = np.stack([starts[known], ends[known]], axis=1)
-    length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
+    everyone = bool(known.all())
+    if not everyone:
+        if not known.any():
+            return known
+        starts, ends = starts[known], ends[known]
+    # (the emitter asks a few travels at a time, many times a layer: no step more than needed)
+    segments = np.concatenate([starts, ends], axis=1).reshape(-1, 2, 2)
+    delta = ends - starts
+    length = np.hypot(delta[:, 0], delta[:, 1])
     point = length <= 1e-9
-    inside = covers_segments(area, segments[~point]) if SHAPELY2 else None
+    has_points = bool(point.any())
+    lines = segments[~point] if has_points else segments
+    inside = covers_segments(area, lines) if SHAPELY2 else None
     if inside is None:  # shapely 1.8: clip them, and compare the lengths
         pieces, source = clip_segments(segments, area, return_index=True)
         clipped = np.bincount(source, np.hypot(*(pieces[:, 1] - pieces[:, 0]).T), minlength=len(segments))
         inside = (clipped >= length - 1e-6)[~point]
-    found = np.zeros(len(segments), dtype=bool)
-    found[~point] = inside
-    found[point] = contains_xy(area, segments[point, 0, 0], segments[point, 0, 1])
+    if has_points:
+        found = np.zeros(len(segments), dtype=bool)
+        found[~point] = inside
+        found[point] = contains_xy(area, segments[point, 0, 0], segments[point, 0, 1])
+    else:
+        found = inside
+    if everyone:
+        return found
+    result = np.zeros(len(known), dtype=bool)
     result[known] = found
     return result
 

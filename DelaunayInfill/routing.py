@@ -307,34 +307,75 @@ def order_paths(
     # ends move to infinity.
     ends = np.concatenate([[p[0] for p in paths], [p[-1] for p in paths]])
     x, y = ends[:, 0].copy(), ends[:, 1].copy()
-    here = np.asarray(start, dtype=float) if start is not None else ends[0]
+    points = ends.tolist()
+    hx, hy = (float(v) for v in start) if start is not None else points[0]
     order = np.zeros(n, dtype=np.int64)
     flipped = np.zeros(n, dtype=bool)
+    d2, dy = np.empty(2 * n), np.empty(2 * n)
     for k in range(n):
-        d2 = (x - here[0]) ** 2 + (y - here[1]) ** 2
+        # squared distance to every free end, written in place (the loop is short; its calls add up)
+        np.subtract(x, hx, out=d2)
+        np.multiply(d2, d2, out=d2)
+        np.subtract(y, hy, out=dy)
+        np.multiply(dy, dy, out=dy)
+        d2 += dy
         j = int(d2.argmin())
         i = j % n
         x[i] = x[i + n] = np.inf
         order[k], flipped[k] = i, j >= n
-        here = ends[i] if j >= n else ends[i + n]
+        hx, hy = points[i] if j >= n else points[i + n]
     # Path ends as complex numbers: gathers on 1-D arrays and abs() (numpy's hypot) keep a round cheap.
     ends_c = ends[:, 0] + 1j * ends[:, 1]
     entry = np.where(flipped, ends_c[order + n], ends_c[order])
     exit_ = np.where(flipped, ends_c[order], ends_c[order + n])
     origin = complex(*np.asarray(start, dtype=float)) if start is not None else entry[0]
-    offsets = np.arange(1, window + 1)
-    # Candidate moves (the same every round): reverse positions i..j, j = i + offset.
-    i = np.arange(n)[:, None]
-    j = np.minimum(i + offsets[None, :], n - 1)
-    valid = (i + offsets[None, :] <= n - 1) & ((i > 0) | (start is not None))
-    nxt = np.minimum(j + 1, n - 1)
-    last = j == n - 1  # reversing up to the end: no travel after it
-    prev = np.maximum(i - 1, 0)
-    rows = np.arange(n)
+    if n >= 2 and rounds > 0:
+        _two_opt(entry, exit_, order, flipped, origin, _moves(n, window, start is not None), rounds)
+    out = [paths[i][::-1] if f else paths[i] for i, f in zip(order, flipped)]
+    travel = float(np.abs(entry[1:] - exit_[:-1]).sum())
+    if start is not None:
+        travel += float(abs(entry[0] - origin))
+    return out, travel
+
+
+_MOVES: dict[tuple, tuple] = {}  # (paths, window, with a start) -> the 2-opt moves (`_moves`)
+
+
+def _moves(n: int, window: int, with_start: bool) -> tuple:
+    """The 2-opt moves of `order_paths` for n paths, remembered (order_paths runs often on few paths).
+
+    Row i, column c: reverse positions i..j with j = i + c + 1 (clipped to n - 1).  Returns
+    ``(i, j, valid, nxt, last, prev, after_first, rows)``: ``i`` (n, 1) and ``after_first``
+    (n, 1, i > 0), the others (n, w) with w = min(window, n - 1) (longer runs are never valid
+    moves), ``rows`` (n,).  Shared: never written to.
+    """
+    key = (n, window, with_start)
+    hit = _MOVES.get(key)
+    if hit is None:
+        offsets = np.arange(1, max(1, min(window, n - 1)) + 1)
+        i = np.arange(n)[:, None]
+        j = np.minimum(i + offsets[None, :], n - 1)
+        valid = (i + offsets[None, :] <= n - 1) & ((i > 0) | with_start)
+        nxt = np.minimum(j + 1, n - 1)
+        last = j == n - 1  # reversing up to the end: no travel after it
+        prev = np.maximum(i - 1, 0)
+        hit = (i, j, valid, nxt, last, prev, i > 0, np.arange(n))
+        if len(_MOVES) >= 256:
+            _MOVES.clear()
+        _MOVES[key] = hit
+    return hit
+
+
+def _two_opt(entry: np.ndarray, exit_: np.ndarray, order: np.ndarray, flipped: np.ndarray, origin, moves: tuple,
+             rounds: int) -> None:
+    """Rounds of 2-opt on a route, in place: `entry`/`exit_` (n,) complex ends of each position's path,
+    `order` (n,) its path, `flipped` (n,) whether it runs backwards; `origin` the start (complex)."""
+    i, j, valid, nxt, last, prev, after_first, rows = moves
+    n = len(order)
     for _ in range(rounds):
         # Reversing positions i..j turns the travels (exit[i-1] -> entry[i]) and
         # (exit[j] -> entry[j+1]) into (exit[i-1] -> exit[j]) and (entry[i] -> entry[j+1]).
-        before = np.where(i > 0, exit_[prev], origin)
+        before = np.where(after_first, exit_[prev], origin)
         old = np.abs(entry[i] - before) + np.where(last, 0.0, np.abs(entry[nxt] - exit_[j]))
         new = np.abs(exit_[j] - before) + np.where(last, 0.0, np.abs(entry[nxt] - entry[i]))
         gain = np.where(valid, old - new, -np.inf)
@@ -344,25 +385,21 @@ def order_paths(
         if movers.size == 0:
             break
         # Apply the best moves whose runs (with one path of margin) do not touch.
-        busy = np.zeros(n + 2, dtype=bool)
+        busy = [False] * (n + 2)
         saved = 0.0
-        for a in movers[np.argsort(-best_gain[movers])]:
-            b = int(j[a, best[a]])
-            if busy[a : b + 3].any():
+        gains, ends_at = best_gain.tolist(), best.tolist()
+        for a in movers[np.argsort(-best_gain[movers])].tolist():
+            b = a + ends_at[a] + 1  # a valid move's j
+            if any(busy[a : b + 3]):
                 continue
-            busy[a : b + 3] = True
-            saved += float(best_gain[a])
+            busy[a : b + 3] = [True] * (b + 3 - a)  # (b + 3 <= n + 2)
+            saved += gains[a]
             run = slice(a, b + 1)
             entry[run], exit_[run] = exit_[run][::-1].copy(), entry[run][::-1].copy()
             order[run] = order[run][::-1].copy()
             flipped[run] = ~flipped[run][::-1]
         if saved < 2e-3 * float(np.abs(entry[1:] - exit_[:-1]).sum()):
             break
-    out = [paths[i][::-1] if f else paths[i] for i, f in zip(order, flipped)]
-    travel = float(np.abs(entry[1:] - exit_[:-1]).sum())
-    if start is not None:
-        travel += float(abs(entry[0] - origin))
-    return out, travel
 
 
 def travel_length(paths: list[np.ndarray], start=None) -> float:

@@ -94,3 +94,15 @@ def test_an_end_on_the_outline_is_reached_within_the_tolerance():
     bends = CombingArea(U_SHAPE, margin=0.5, tolerance=0.1).path(start, end)
     assert bends is not None and len(bends) >= 2
     assert _route(start, bends, end).within(U_SHAPE.buffer(0.1))
+
+
+def test_segments_inside_with_unknown_and_zero_length_rows():
+    """Rows with a non-finite end are outside, a zero-length row is inside where its point is; the others as shapely says."""
+    starts = np.array([[5, 5], [np.nan, 5], [5, 5], [15, 20], [5, 5], [np.inf, 0], [25, 25], [5, 25]], dtype=float)
+    ends = np.array([[5, 25], [5, 25], [5, 5], [15, 20], [25, 25], [5, 5], [25, 25], [25, 25]], dtype=float)
+    expected = [True, False, True, False, False, False, True, False]
+    assert segments_inside(starts, ends, U_SHAPE).tolist() == expected
+    for keep in ([0, 2, 3], [1, 5], [0, 4, 7], [2]):  # every row alone or in any company: the same answer
+        assert segments_inside(starts[keep], ends[keep], U_SHAPE).tolist() == [expected[k] for k in keep]
+    assert segments_inside(np.zeros((0, 2)), np.zeros((0, 2)), U_SHAPE).tolist() == []
+    assert segments_inside(starts, ends, None).tolist() == [False] * len(starts)

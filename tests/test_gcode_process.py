@@ -389,3 +389,89 @@ def test_travels_comb_round_the_inside_instead_of_retracting(star, star_done):
 def test_a_detour_longer_than_the_combing_limit_retracts(star, star_done):
     _, limited = process_gcode(star, ProcessSettings(seed=3, combing_max_distance=5.0))
     assert limited.infill_retractions > 0 and star_done[1].infill_retractions == 0
+
+
+def test_running_argmin_is_where_each_prefix_has_its_first_minimum():
+    from DelaunayInfill.gcode.process import _running_argmin
+
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 7, 40):
+        values = rng.integers(0, 4, n).astype(float)  # many ties: the first of equal minima counts
+        expected = [int(np.argmin(values[: k + 1])) for k in range(n)]
+        assert _running_argmin(values).tolist() == expected
+        assert _running_argmin(values, np.minimum.accumulate(values)).tolist() == expected
+
+
+def test_runs_travel_is_each_runs_travel_at_once():
+    from DelaunayInfill.gcode.process import _run_travel, _runs_travel
+
+    rng = np.random.default_rng(6)
+    cost = lambda a, b: np.nan_to_num(np.hypot(*(np.asarray(b, float) - np.asarray(a, float)).reshape(-1, 2).T))  # noqa: E731
+    runs = [[rng.uniform(0, 50, (int(rng.integers(2, 5)), 2)) for _ in range(int(rng.integers(0, 4)))] for _ in range(9)]
+    ends = rng.uniform(0, 50, (9, 4))
+    ends[2, :2] = np.nan  # an unknown start costs nothing
+    got = _runs_travel(runs, list(ends), cost)
+    assert got.tolist() == pytest.approx([_run_travel(r, e, cost) for r, e in zip(runs, ends, strict=True)], rel=1e-12)
+
+
+def test_plan_runs_stops_when_a_round_gives_back_the_same_route(monkeypatch):
+    """A round whose runs join into the route it started from would repeat itself: it is not run again."""
+    import DelaunayInfill.gcode.process as process
+
+    paths = [np.array([[x, 0.0], [x, 10.0]]) if k % 2 == 0 else np.array([[x, 10.0], [x, 0.0]])
+             for k, x in enumerate(np.arange(6.0))]
+    ends = np.array([[0.0, -1.0, 2.0, 11.0], [3.0, 11.0, 5.0, -1.0]])
+    cost = lambda a, b: np.hypot(*(np.asarray(b, float) - np.asarray(a, float)).reshape(-1, 2).T)  # noqa: E731
+    calls = []
+    real = process._route_cuts
+    monkeypatch.setattr(process, "_route_cuts", lambda *a: calls.append(1) or real(*a))
+    runs = process._plan_runs(list(paths), ends, cost)
+    assert len(calls) == 1
+    assert [len(r) for r in runs] == [3, 3]
+    assert all(a is b for a, b in zip([p for r in runs for p in r], paths, strict=True))  # the serpentine stays as it is
+
+
+def test_a_layers_density_lookups_answer_as_infill_density():
+    """The per-layer memo of `infill_density` gives its answer with and without an area, families or not."""
+    from types import SimpleNamespace
+
+    from DelaunayInfill.gcode.infer import infill_density
+    from DelaunayInfill.gcode.process import _Run
+
+    lw = 0.4
+    grid = np.array([[[x, 0.0], [x, 20.0]] for x in np.arange(0.0, 20.0, 2.0)]
+                    + [[[0.0, y], [20.0, y]] for y in np.arange(0.0, 20.0, 2.0)])
+    rng = np.random.default_rng(7)
+    tangle = rng.uniform(0, 20, (40, 2, 2))  # no families: only the area gives a density
+    run = SimpleNamespace(layer_densities={})
+    for fill in (grid, tangle, grid[:3]):
+        for area in (None, 400.0, None, 250.0):
+            assert _Run._infill_density(run, fill, lw, area) == infill_density(fill, lw, area)
+    assert _Run._infill_density(run, tangle, lw, 400.0) is not None
+    assert len(run.layer_densities) == 3  # one look at each set of lines
+
+
+def test_zones_later_regions_win_and_a_tiled_area_has_no_base_zone():
+    """Region zones are what each region holds of the area less later regions, the base what none holds;
+    when the regions tile the area there is no base zone (its area 0), found without the overlay."""
+    from types import SimpleNamespace
+
+    from shapely.geometry import box
+
+    from DelaunayInfill.gcode.process import _Run
+
+    lw = 0.4
+    inner = (10 - 2 * lw) * (10 - 2 * lw)  # a 10 x 10 mm square less a band of one line width
+    area = box(0, 0, 20, 10)
+    cases = [
+        ([(box(0, 0, 10, 10), 0.3, "a"), (box(10, 0, 20, 10), 0.1, "b")], [inner, inner, 0.0]),
+        ([(box(0, 0, 12, 10), 0.3, "a"), (box(10, 0, 20, 10), 0.1, "b")], [inner, inner, 0.0]),  # b wins 10..12
+        ([(box(-5, -5, 25, 15), 0.3, "a")], [(20 - 2 * lw) * (10 - 2 * lw), 0.0]),  # one region covers it all
+        ([(box(0, 0, 10, 10), 0.3, "a")], [inner, inner]),  # the base: the other half
+        ([], [(20 - 2 * lw) * (10 - 2 * lw)]),
+    ]
+    for regions, expected in cases:
+        zones, areas = _Run._zones(SimpleNamespace(zone_areas={}), area, regions, lw)
+        assert len(zones) == len(regions) + 1
+        assert areas == pytest.approx(expected, abs=1e-6)
+        assert [z.area for z in zones] == areas

@@ -125,3 +125,26 @@ def test_clip_finds_the_same_pieces_however_it_pairs_segments_with_the_boundary(
     assert np.array_equal(swept, every_pair) and np.array_equal(swept_from, every_from)
     assert np.array_equal(by_distance, every_pair)
     assert clip_segments(segments[:0], area).shape == (0, 2, 2)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 40), st.booleans())
+def test_greedy_order_takes_the_nearest_free_end_first(seed, count, closed):
+    """Without 2-opt the order is the nearest free path end each time, ties to the lower index (heads first)."""
+    rng = np.random.default_rng(seed)
+    # coarse coordinates make equal distances (ties) common; closed paths have equal ends
+    paths = [rng.integers(0, 6, (int(rng.integers(2, 4)), 2)).astype(float) for _ in range(count)]
+    if closed:
+        paths = [np.vstack([p, p[:1]]) for p in paths]
+    got, _ = order_paths(paths, start=(2.0, 3.0), rounds=0)
+    ends = [tuple(p[0]) for p in paths] + [tuple(p[-1]) for p in paths]
+    free, here, expected = set(range(count)), (2.0, 3.0), []
+    for _ in range(count):
+        j = min((j for j in range(2 * count) if j % count in free),
+                key=lambda j: ((ends[j][0] - here[0]) ** 2 + (ends[j][1] - here[1]) ** 2, j))
+        i = j % count
+        free.discard(i)
+        expected.append(paths[i][::-1] if j >= count else paths[i])
+        here = tuple(expected[-1][-1])
+    assert len(got) == count
+    assert all(np.array_equal(a, b) for a, b in zip(got, expected, strict=True))

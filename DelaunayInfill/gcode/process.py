@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..combing import CombingArea, segments_inside
-from ..geometry import contains_xy, polygons_of, to_multipolygon, unary_union
+from ..geometry import contains_xy, empty_area, polygons_of, to_multipolygon, unary_union
 from ..routing import order_paths
 from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of, split_by_line_ends
 from .emit import EmitParams, emit_block
@@ -60,10 +60,11 @@ __all__ = [
 _TIME_ELAPSED = re.compile(r"^;TIME_ELAPSED:(-?[\d.]+)", re.M)
 _M204 = re.compile(r"^M204 [^\n;]*?S(\d+\.?\d*)", re.M)
 _DEFAULT_LINE_WIDTH = 0.4
-_RETRACT_TRAVEL_MM = 40.0
+_RETRACT_TRAVEL_MM = 40.0  # a retraction and prime take about as long as this much travel
+_NEGLIGIBLE_AREA = 1e-9  # share of an area below which what is left of it is rounding, not a zone
 # the report's counters that a repeated layer adds to again (`_Run._totals`)
 _COUNTED = ("layers_total", "layers_processed", "layers_kept", "infill_before_mm", "infill_after_mm",
-            "infill_travel_mm", "infill_retractions", "blocks_replaced", "blocks_kept")  # a retraction and prime take about as long as this much travel
+            "infill_travel_mm", "infill_retractions", "blocks_replaced", "blocks_kept")
 
 
 # ----------------------------------------------------------------------------- survey
@@ -322,6 +323,7 @@ class _Run:
         self.shares: dict[tuple, tuple] = {}
         self.reach_density: dict[str, float] = {}
         self.few_lines_density: dict[tuple, float] = {}
+        self.layer_densities: dict[tuple, tuple] = {}  # this layer's `infill_density` answers
         self.grown: dict[tuple, tuple] = {}
         self.inside_memo: dict[tuple, tuple] = {}
         self.unions: dict[tuple, tuple] = {}
@@ -547,7 +549,7 @@ class _Run:
             return self.s.density
         d = self.mesh_density.get(mesh)
         if d is None:
-            d = infill_density(fill, lw, area.area if area is not None else None)
+            d = self._infill_density(fill, lw, area.area if area is not None else None)
             if d is None:
                 return 0.2
             if len(fill) >= 12:
@@ -567,7 +569,7 @@ class _Run:
                    None if area is None else round(area.area, 3))
             d = self.few_lines_density.get(key)
             if d is None:
-                d = infill_density(fill, lw, area.area if area is not None else None) or 0.2
+                d = self._infill_density(fill, lw, area.area if area is not None else None) or 0.2
                 if len(self.few_lines_density) >= 256:
                     self.few_lines_density.clear()
                 self.few_lines_density[key] = d
@@ -575,8 +577,24 @@ class _Run:
                 self.region_density[mesh] = d
         return d
 
+    def _infill_density(self, fill: np.ndarray, lw: float, area: float | None = None) -> float | None:
+        """`infill_density`, remembered for the layer by the lines themselves.
+
+        A mesh's lines are asked up to four times in its layer (the closing reach, the modifier
+        split, the mesh's and the region's density).  With families found the area plays no part,
+        so one look at the lines answers every area; only the fallback (no families) uses it.
+        """
+        key = (fill.dtype.str, fill.shape, fill.tobytes(), lw)
+        hit = self.layer_densities.get(key)
+        if hit is None:
+            hit = self.layer_densities[key] = (infill_density(fill, lw),)
+        if hit[0] is None and area:
+            return infill_density(fill, lw, area)
+        return hit[0]
+
     def _layer(self, parse: LayerParse):
         s = self.s
+        self.layer_densities = {}
         m = parse.moves
         moved = parse.moved()
         extr = parse.extruding()
@@ -603,7 +621,7 @@ class _Run:
                 fill_now = parse.moves
                 sel = parse.mesh_mask(name) & is_fill & (fill_now["de"] > 0)
                 segs = segments_of(fill_now, sel)
-                guess = infill_density(segs, lw)
+                guess = self._infill_density(segs, lw)
                 if guess is not None:
                     self.reach_density[name] = guess  # only sets a closing radius: the first estimate will do
                 guess = guess or 0.2
@@ -871,7 +889,7 @@ class _Run:
         """Cura's own density of a mesh (from its FILL spacing), remembered."""
         d = self.cura_density.get(mesh)
         if d is None:
-            d = infill_density(fill, lw) or 0.2
+            d = self._infill_density(fill, lw) or 0.2
             if len(fill) >= 12:
                 self.cura_density[mesh] = d
         return d
@@ -959,15 +977,26 @@ class _Run:
         if hit is not None and all(a is b for a, b in zip(hit[0], regions, strict=True)):
             return hit[1]
         owns = [None] * len(regions)
-        later = None
+        later = None  # the union of regions[k + 1:]
         for k in range(len(regions) - 1, -1, -1):
             a = regions[k][0]
             own = a.intersection(area)
             if later is not None:
                 own = own.difference(later)
-            later = a if later is None else later.union(a)
+            if k > 0:  # (the union of them all is for the base zone only, when it has one)
+                later = a if later is None else later.union(a)
             owns[k] = to_multipolygon(own)
-        owns.append(to_multipolygon(area.difference(later)) if later is not None else to_multipolygon(area))
+        if not regions:
+            owns.append(to_multipolygon(area))
+        elif area.area - sum(own.area for own in owns) <= _NEGLIGIBLE_AREA * max(area.area, 1.0):
+            # The regions' parts (disjoint, inside `area`) cover it: no base zone.  Said from their
+            # areas, as the difference would say it: when the regions tile the part (modifiers),
+            # `area` and their union share every border, and that difference is the slowest overlay.
+            owns.append(empty_area())
+        else:
+            first = regions[0][0]
+            every = first if later is None else later.union(first)
+            owns.append(to_multipolygon(area.difference(every)))
         inner = list(owns)
         for k, own in enumerate(owns):
             if own.area > 0:
@@ -987,7 +1016,10 @@ class _Run:
         hit = memo.get(key)
         if hit is not None and hit[0] is zones:
             return hit[1]
-        segs = np.concatenate([np.stack([p[:-1], p[1:]], axis=1) for p in paths])
+        points = np.concatenate(paths)
+        steps = np.ones(len(points) - 1, dtype=bool)  # point i to i + 1, but from one path to the next
+        steps[np.cumsum([len(p) for p in paths[:-1]], dtype=np.int64) - 1] = False
+        segs = np.stack([points[:-1][steps], points[1:][steps]], axis=1)
         step = max(lw / 2, 0.1)
         d = segs[:, 1] - segs[:, 0]
         seg_len = np.hypot(d[:, 0], d[:, 1])
@@ -1101,7 +1133,10 @@ def _plan_runs(paths: list[np.ndarray], ends: np.ndarray, cost_of, rounds: int =
         if total >= best_cost - 1e-6:
             break
         best_runs, best_cost = runs, total
-        order = [p for r in runs for p in r]
+        joined = [p for r in runs for p in r]
+        if len(joined) == len(order) and all(a is b for a, b in zip(joined, order)):
+            break  # the same route again: the next round would cut and cost it the same way
+        order = joined
     return best_runs
 
 
@@ -1147,17 +1182,19 @@ def _route_cuts(paths: list[np.ndarray], ends: np.ndarray, cost_of) -> np.ndarra
     f = np.full(n + 1, np.inf)
     f[0] = 0.0
     choice = np.zeros((nb, n + 1), dtype=np.int64)
+    stay = np.arange(n + 1)  # choice "no run ends here": the cut stays where it is
+    through = np.full(n + 1, np.inf)  # (through[0] stays inf: a run has a path)
+    run_from = np.zeros(n + 1, dtype=np.int64)
     for i in range(nb):
         hop = float(hops[i])
         # Run k'..k-1: f[k'] + |start -> head k'| - inner[k'] + inner[k-1] + |tail k-1 -> stop|.
         enter = f[:n] + enter_cost[i] - inner
         best = np.minimum.accumulate(enter)
-        arg = _running_argmin(enter)
-        through = np.full(n + 1, np.inf)
+        run_from[1:] = _running_argmin(enter, best)
         through[1:] = best + inner + exit_cost[i]
         empty = f + hop
         use_run = through < empty
-        choice[i] = np.where(use_run, np.r_[0, arg], np.arange(n + 1))
+        choice[i] = np.where(use_run, run_from, stay)
         f = np.where(use_run, through, empty)
     if not np.isfinite(f[n]):
         return np.r_[0, np.full(nb, n)]
@@ -1173,16 +1210,20 @@ def _route_cuts(paths: list[np.ndarray], ends: np.ndarray, cost_of) -> np.ndarra
 
 def _runs_travel(runs: list, ends: list, cost_of) -> np.ndarray:
     """`_run_travel` of many (run, ends) pairs with one call of `cost_of`."""
-    starts, stops, owner = [], [], []
+    # Every run's points in travel order: its start, head and tail of each path, its end; the
+    # travels are the consecutive pairs (each run adds an even count, so pairs never straddle runs).
+    points: list = []
+    travels = np.empty(len(runs), dtype=np.int64)
     for k, (run, b) in enumerate(zip(runs, ends, strict=True)):
-        pts = np.concatenate([np.asarray(b[:2], dtype=float)[None]]
-                             + [np.stack([p[0], p[-1]]) for p in run]
-                             + [np.asarray(b[2:], dtype=float)[None]])
-        starts.append(pts[0::2])
-        stops.append(pts[1::2])
-        owner.append(np.full(len(pts) // 2, k))
-    costs = cost_of(np.concatenate(starts), np.concatenate(stops))
-    return np.bincount(np.concatenate(owner), costs, len(runs))
+        points.append(b[:2])
+        for p in run:
+            points.append(p[0])
+            points.append(p[-1])
+        points.append(b[2:])
+        travels[k] = len(run) + 1
+    pts = np.array(points, dtype=float).reshape(-1, 2)
+    costs = cost_of(pts[0::2], pts[1::2])
+    return np.bincount(np.repeat(np.arange(len(runs)), travels), costs, len(runs))
 
 
 def _run_travel(run: list[np.ndarray], ends, cost_of) -> float:
@@ -1198,10 +1239,13 @@ def _run_travel(run: list[np.ndarray], ends, cost_of) -> float:
     return float(cost_of(pts[:, 0], pts[:, 1]).sum())
 
 
-def _running_argmin(values: np.ndarray) -> np.ndarray:
-    """Index of the minimum of values[:k + 1] for every k."""
-    best = np.minimum.accumulate(values)
-    is_new = np.r_[True, values[1:] < best[:-1]]
+def _running_argmin(values: np.ndarray, best: np.ndarray | None = None) -> np.ndarray:
+    """Index of the minimum of values[:k + 1] for every k (`best`: their running minimum, if known)."""
+    if best is None:
+        best = np.minimum.accumulate(values)
+    is_new = np.empty(len(values), dtype=bool)
+    is_new[:1] = True
+    np.less(values[1:], best[:-1], out=is_new[1:])
     idx = np.where(is_new, np.arange(len(values)), 0)
     return np.maximum.accumulate(idx)
 

@@ -465,10 +465,18 @@ class _Run:
     def _repeat_key(self, words: LayerWords) -> tuple:
         """What a layer's result depends on: its text (but Z and E numbers) and what this run remembers."""
         st = self.state
+        # (the feature type before the layer only matters up to its first ;TYPE: line; Cura starts with one)
+        type_before = None if words.key.startswith("\n;TYPE:") else st.type
         return (
             words.key,
-            (st.x, st.y, st.f, st.depth, st.fw_retracted, st.extruder, st.type, st.mesh, st.relative_e,
+            (st.x, st.y, st.f, st.depth, st.fw_retracted, st.extruder, type_before, st.mesh, st.relative_e,
              st.relative_xyz, st.e_mode_relative),
+            *self._learned(),
+        )
+
+    def _learned(self) -> tuple:
+        """What this run has learned so far that a layer's result depends on (retraction, per-mesh figures)."""
+        return (
             tuple(vars(self.retraction).values()),
             (tuple(self.mesh_lw.items()), self.any_lw, tuple(self.mesh_density.items()),
              tuple(self.region_density.items()), tuple(self.reach_density.items()), tuple(self.cura_density.items())),
@@ -503,6 +511,11 @@ class _Run:
         if self.user_regions:
             record.extra["regions"] = self._region_sections(parse.z)
         self.repeats.put(key, record)
+        # The layer has taught the run its retraction and per-mesh figures (each learned once, from
+        # this layer's own lines, and used by it): the same layer met again with them gives this result.
+        learned = (*key[:2], *self._learned())
+        if learned != key:
+            self.repeats.put(learned, record)
 
     def _replay(self, text: str, words: LayerWords, record: LayerRecord) -> str | None:
         """`text` written from the record of the layer it repeats; None when it does not repeat it after all."""

@@ -334,7 +334,15 @@ def test_owner_grid_equals_a_full_nearest_line_search(seed):
     rows, cols = grid.owner.shape
     gx, gy = np.meshgrid(grid.x0 + step / 2 + np.arange(cols) * step, grid.y0 + step / 2 + np.arange(rows) * step)
     pts = np.column_stack([gx.ravel(), gy.ravel()])
-    inside = contains_xy(area, pts[:, 0], pts[:, 1])
+    centred = contains_xy(area, pts[:, 0], pts[:, 1]).reshape(rows, cols)
+    # the cells round those whose centre is inside have an owner too (the area's border runs through them)
+    padded = np.pad(centred, 1)
+    inside = np.zeros_like(centred)
+    for di in range(3):
+        for dj in range(3):
+            inside |= padded[di:di + rows, dj:dj + cols]
+    assert np.array_equal(grid.centred, centred)
+    inside = inside.ravel()
     dist = np.full((len(fills), inside.sum()), np.inf)
     for k, (fill, spacing) in enumerate(zip(fills, spacings, strict=True)):
         if len(fill):
@@ -342,6 +350,8 @@ def test_owner_grid_equals_a_full_nearest_line_search(seed):
     expected = np.full(len(pts), -1)
     expected[inside] = np.argmin(dist, axis=0)
     assert np.array_equal(grid.owner.ravel(), expected)
+    # probes (`at`) see an owner only in cells whose centre is inside the area
+    assert np.array_equal(grid.at(pts), np.where(centred.ravel(), expected, -1))
 
 
 def test_distances_equal_shapely_one_by_one():

@@ -188,14 +188,18 @@ def fill_hull(runs: list[np.ndarray], line_width: float, reach: float, convex_fi
 class _OwnerGrid:
     """Which mesh's lines are nearest (in units of its spacing) at the centres of a grid's cells.
 
-    ``owner`` (rows, cols): mesh index, -1 outside the area; cell (i, j) spans
-    x from ``x0 + j * step``, y from ``y0 + i * step``.
+    ``owner`` (rows, cols): mesh index, -1 away from the area; cell (i, j) spans
+    x from ``x0 + j * step``, y from ``y0 + i * step``.  ``centred`` (rows,
+    cols): whether the cell's centre lies in the area (None: where ``owner``
+    is set).  Cells next to such a cell have an owner too: the area's border
+    runs through them.
     """
 
     x0: float
     y0: float
     step: float
     owner: np.ndarray
+    centred: np.ndarray | None = None
 
     def _cells(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Row and column of the cell under each point (p, 2), and whether it lies on the grid."""
@@ -205,8 +209,10 @@ class _OwnerGrid:
         return i, j, (i >= 0) & (i < rows) & (j >= 0) & (j < cols)
 
     def at(self, pts: np.ndarray) -> np.ndarray:
-        """Owner at points (p, 2); -1 outside the grid or the area."""
+        """Owner at points (p, 2); -1 outside the grid or in a cell whose centre is outside the area."""
         i, j, ok = self._cells(pts)
+        if self.centred is not None:
+            ok[ok] = self.centred[i[ok], j[ok]]
         out = np.full(len(pts), -1, dtype=np.int64)
         out[ok] = self.owner[i[ok], j[ok]]
         return out
@@ -346,15 +352,29 @@ def _inside_lattice(area, xs: np.ndarray, ys: np.ndarray, tol: float = 1e-9) -> 
 
 
 def _owner_grid(area, fills: list[np.ndarray], spacings: list[float], step: float) -> _OwnerGrid | None:
-    """The nearest-line owner grid of `split_by_lines` (None: no area or no lines)."""
+    """The nearest-line owner grid of `split_by_lines` (None: no area or no lines).
+
+    Every cell whose centre lies in `area`, or next to one that does, gets
+    the mesh whose lines are nearest its centre (in line spacings).
+    """
     if area.is_empty or not any(len(f) for f in fills):
         return None
     minx, miny, maxx, maxy = area.bounds
     step = max(step, np.sqrt((maxx - minx) * (maxy - miny) / 60000.0))
     xs, ys = np.arange(minx + step / 2, maxx, step), np.arange(miny + step / 2, maxy, step)
-    inside = _inside_lattice(area, xs, ys).ravel()
+    centred = _inside_lattice(area, xs, ys)
+    # The cells round those too (the area's border runs through them): owned cells reach past the
+    # border, so cutting them to the area leaves no staircase of free cells along it (a host sliver
+    # at every step, each cut out and handed to a modifier in turn).
+    by_rows = centred.copy()
+    by_rows[1:] |= centred[:-1]
+    by_rows[:-1] |= centred[1:]
+    owned = by_rows.copy()
+    owned[:, 1:] |= by_rows[:, :-1]
+    owned[:, :-1] |= by_rows[:, 1:]
+    owned = owned.ravel()
     grid = np.full((len(ys), len(xs)), -1, dtype=np.int64)
-    rows, cols = np.divmod(np.flatnonzero(inside), len(xs))
+    rows, cols = np.divmod(np.flatnonzero(owned), len(xs))
     pts = np.column_stack([xs[cols], ys[rows]])
     if len(pts):
         # Distances in line spacings.  A first pass looks no further than `bound` spacings (far
@@ -376,8 +396,8 @@ def _owner_grid(area, fills: list[np.ndarray], spacings: list[float], step: floa
             for k, (tree, spacing) in enumerate(zip(trees, spacings, strict=True)):
                 if tree is not None:
                     dist[k, far] = tree.query(pts[far])[0] / spacing
-        grid.ravel()[inside] = np.argmin(dist, axis=0)
-    return _OwnerGrid(minx, miny, step, grid)
+        grid.ravel()[owned] = np.argmin(dist, axis=0)
+    return _OwnerGrid(minx, miny, step, grid, centred)
 
 
 def split_by_lines(area, fills: list[np.ndarray], spacings: list[float], step: float = 0.5) -> list:

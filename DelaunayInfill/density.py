@@ -114,16 +114,21 @@ class DensityMap:
             Index 0 the base zone, then the visible part of each region
             (minus later regions), all clipped to `area`.
         """
+        polys = [poly for poly, _ in self.regions]
+        boxes = np.array([poly.bounds for poly in polys], dtype=float).reshape(-1, 4)
         out = []
-        later = None
-        for poly, _ in reversed(self.regions):
-            part = poly.intersection(area)
-            if later is not None:
-                part = part.difference(later)
+        for k, poly in enumerate(polys):
+            part = poly if area.covers(poly) else poly.intersection(area)
+            # Only later regions whose inside meets this one's take anything from it (regions
+            # that merely touch, as modifier meshes split along a border do, take nothing).
+            x0, y0, x1, y1 = boxes[k]
+            later = [polys[j] for j in range(k + 1, len(polys))
+                     if boxes[j, 0] <= x1 and boxes[j, 2] >= x0 and boxes[j, 1] <= y1 and boxes[j, 3] >= y0
+                     and poly.relate_pattern(polys[j], "T********")]
+            if later:
+                part = part.difference(later[0] if len(later) == 1 else unary_union(later))
             out.append(to_multipolygon(part))
-            later = poly if later is None else unary_union([later, poly])
-        out.reverse()
-        base = area if later is None else area.difference(later)
+        base = area.difference(unary_union(polys)) if polys else area
         return [to_multipolygon(base), *out]
 
     def _weights(self, k: int, xy: np.ndarray) -> np.ndarray:

@@ -23,14 +23,16 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
+from scipy.spatial import QhullError, cKDTree
 
 from .decomposition import decompose_convex
 from .density import KAPPA, DensityMap, check_line_width, paper_radius
-from .geometry import as_area, boundary_segments, contains_xy, polygons_of, to_multipolygon, unary_union
+from .geometry import as_area, boundary_segments, box, contains_xy, polygons_of, to_multipolygon, unary_union
 from .routing import chain_segments, clip_segments, odd_vertex_count, order_paths
 from .sampling import sample_poisson_disk
 from .triangulation import (
+    GrowingDelaunay,
+    canonical_triangles,
     delaunay_triangles,
     edge_length_stats,
     lop_violations,
@@ -48,6 +50,7 @@ _MAX_ITERATIONS = 8
 _LOOP_TOLERANCE = 0.003  # several zones: the loop stops within 0.3 points (balancing does the rest)
 _SLIVER = 1.5  # hull triangles with a circumradius above 1.5 r are not part of the pattern
 _COARSE = 36.0  # several zones: a zone under this many squared radii is only balanced once off target
+_THIN = 1.4  # zone interiors: a zone of mean width under this many line widths is kept whole
 
 
 def segment_length(segments: np.ndarray) -> float:
@@ -550,7 +553,9 @@ def _zone_interiors(zones: list, width: float, tiled=None) -> list:
     calibrated on the rest (as a region's density is measured: away from its
     border, where lines on the border do not count twice).  Borders with the
     footprint's outline are kept; a zone that the band would (nearly) swallow
-    is kept whole.  `tiled`: the area the zones tile, when they do (the
+    is kept whole, as is a zone narrower on average than 1.4 widths (twice
+    its area over its perimeter: a strip that narrow loses over 70 % to a
+    band along one side).  `tiled`: the area the zones tile, when they do (the
     others are then its difference with a zone).
     """
     present = [k for k, z in enumerate(zones) if z.area > 0]
@@ -558,9 +563,21 @@ def _zone_interiors(zones: list, width: float, tiled=None) -> list:
         return zones
     out = list(zones)
     for k in present:
-        others = tiled.difference(zones[k]) if tiled is not None else unary_union([zones[j] for j in present if j != k])
-        inner = to_multipolygon(zones[k].difference(others.buffer(width, 4)))
-        if inner.area >= 0.3 * zones[k].area:
+        zone = zones[k]
+        # Narrow zones are kept whole without cutting (thin strips between the walls and the
+        # regions have long ragged outlines that are costly to cut).
+        if 2.0 * zone.area < _THIN * width * zone.length:
+            continue
+        if tiled is not None:
+            # Only the others within a width of the zone matter: the tiled area is cut to the
+            # zone's box grown by two widths first (the band is the same, its making cheaper).
+            x0, y0, x1, y1 = zone.bounds
+            grow = 2.0 * width
+            others = tiled.intersection(box(x0 - grow, y0 - grow, x1 + grow, y1 + grow)).difference(zone)
+        else:
+            others = unary_union([zones[j] for j in present if j != k])
+        inner = to_multipolygon(zone.difference(others.buffer(width, 4)))
+        if inner.area >= 0.3 * zone.area:
             out[k] = inner
     return out
 
@@ -641,12 +658,15 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
     (points, triangles, segments, measured)
     """
     known = {} if known is None else known  # edges measured (points are only appended: indices stay)
+    growing = None  # qhull's triangulation, points added round by round
     for _ in range(rounds):
         segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known)
         short = [k for k in np.flatnonzero(small) if measured[k] < targets[k] - _TOLERANCE]
         if not short:
             break
-        a, b, c = (points[triangles[:, k]] for k in range(3))
+        # In a fixed order from a fixed corner: the centres do not depend on how qhull lists them.
+        tri = canonical_triangles(triangles)
+        a, b, c = (points[tri[:, k]] for k in range(3))
         d = 2.0 * (a[:, 0] * (b[:, 1] - c[:, 1]) + b[:, 0] * (c[:, 1] - a[:, 1]) + c[:, 0] * (a[:, 1] - b[:, 1]))
         ok = np.abs(d) > 1e-12
         d = np.where(ok, d, 1.0)
@@ -669,11 +689,29 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
             added.append(center[widest[:count]])
         if not added:
             break
-        points = np.r_[points, np.concatenate(added)]
-        triangles = delaunay_triangles(points)
+        added = np.concatenate(added)
+        triangles = None
+        if growing is None:
+            growing = _growing_delaunay(points)
+        if growing is not None:
+            try:
+                triangles = growing.add(added)
+            except (QhullError, ValueError):  # qhull refuses: triangulate afresh (and start over next round)
+                growing = None
+        points = np.r_[points, added]
+        if triangles is None:
+            triangles = delaunay_triangles(points)
     else:
         segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known)
     return points, triangles, segments, measured
+
+
+def _growing_delaunay(points):
+    """A `GrowingDelaunay` of the points (n, 2), or None where qhull refuses them (degenerate)."""
+    try:
+        return GrowingDelaunay(points)
+    except (QhullError, ValueError):
+        return None
 
 
 def _thin_dense_zones(points, triangles, meter, targets, width, small, known=None):
@@ -693,21 +731,24 @@ def _thin_dense_zones(points, triangles, meter, targets, width, small, known=Non
     (segments, measured)
         Printed edges (k, 2, 2) and the measured density per zone.
     """
-    edges = unique_edges(triangles)
+    # The edges (as `unique_edges` gives them) and the triangles on each side of every edge
+    # (-1 on the hull), from one sort of the triangles' sides by vertex pair.
+    n = len(points)
+    t = np.asarray(triangles, dtype=np.int64)
+    u, v = t.ravel(), np.roll(t, -1, axis=1).ravel()  # side k of triangle i at 3 i + k
+    side_key = np.minimum(u, v) * n + np.maximum(u, v)
+    order = np.argsort(side_key, kind="stable")
+    sorted_key = side_key[order]
+    first = np.ones(len(sorted_key), dtype=bool)
+    first[1:] = sorted_key[1:] != sorted_key[:-1]
+    edge_of = np.cumsum(first) - 1
+    key = sorted_key[first]
+    edges = np.stack((key // n, key % n), axis=1).astype(np.intp)
+    owners = np.full((len(edges), 2), -1, dtype=np.int64)
+    owners[edge_of[first], 0] = order[first] // 3
+    owners[edge_of[~first], 1] = order[~first] // 3
     segments = points[edges]
     keep = np.ones(len(edges), dtype=bool)
-    # Triangles on each side of every edge (-1 on the hull).
-    n = len(points)
-    tri_edges = np.sort(np.stack([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=1), axis=2)
-    edge_key = edges[:, 0].astype(np.int64) * n + edges[:, 1]
-    tri_edge_ids = np.searchsorted(edge_key, tri_edges[..., 0].astype(np.int64) * n + tri_edges[..., 1])
-    owners = np.full((len(edges), 2), -1, dtype=np.int64)
-    flat_edge = tri_edge_ids.ravel()
-    flat_tri = np.repeat(np.arange(len(triangles)), 3)
-    order = np.argsort(flat_edge, kind="stable")
-    first = np.r_[True, flat_edge[order][1:] != flat_edge[order][:-1]]
-    owners[flat_edge[order][first], 0] = flat_tri[order][first]
-    owners[flat_edge[order][~first], 1] = flat_tri[order][~first]
     opened = np.zeros(len(triangles) + 1, dtype=bool)  # last slot stands for "no triangle"
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
     # Length of every edge inside every zone: leaving edges out does not change it.

@@ -15,6 +15,8 @@ from .geometry import contains_xy
 
 __all__ = [
     "delaunay_triangles",
+    "GrowingDelaunay",
+    "canonical_triangles",
     "unique_edges",
     "lop_violations",
     "triangle_angles",
@@ -43,12 +45,57 @@ def delaunay_triangles(points: np.ndarray) -> np.ndarray:
         tri = Delaunay(points)
     except (QhullError, ValueError):  # all points collinear or coincident
         return np.zeros((0, 3), dtype=np.intp)
-    simplices = tri.simplices.astype(np.intp)
+    return _counter_clockwise(points, tri.simplices)
+
+
+def _counter_clockwise(points: np.ndarray, simplices: np.ndarray) -> np.ndarray:
+    """Triangles (t, 3) of vertex indices into `points` (n, 2), each turned counter-clockwise (a copy)."""
+    simplices = simplices.astype(np.intp)
     a, b, c = (points[simplices[:, k]] for k in range(3))
     cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
     flip = cross < 0
     simplices[flip] = simplices[flip][:, [0, 2, 1]]
     return simplices
+
+
+class GrowingDelaunay:
+    """Delaunay triangles of a point set that only grows (points appended, indices kept).
+
+    Adding a few points to qhull's incremental triangulation costs a fraction
+    of triangulating them all again.  The triangles are those of
+    `delaunay_triangles` of all the points, in another order (and each may
+    start at another corner).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 2)
+        At least 3 points, not all collinear (else qhull's error is raised:
+        ``scipy.spatial.QhullError`` or ValueError).
+    """
+
+    def __init__(self, points: np.ndarray):
+        self.points = np.asarray(points, dtype=float)
+        self._qhull = Delaunay(self.points, incremental=True)
+
+    def add(self, points: np.ndarray) -> np.ndarray:
+        """Append points (m, 2); returns the triangles (t, 3) of all points, counter-clockwise."""
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        if len(points):
+            self._qhull.add_points(points)
+            self.points = np.concatenate((self.points, points))
+        return _counter_clockwise(self.points, self._qhull.simplices)
+
+
+def canonical_triangles(triangles: np.ndarray) -> np.ndarray:
+    """Triangles (t, 3) each started at its smallest vertex index (turn kept), rows sorted.
+
+    Two triangulations with the same triangles give the same array, so what
+    is computed from it does not depend on the order qhull listed them in.
+    """
+    triangles = np.asarray(triangles, dtype=np.intp).reshape(-1, 3)
+    start = np.argmin(triangles, axis=1)
+    turned = np.take_along_axis(triangles, (start[:, None] + np.arange(3)) % 3, axis=1)
+    return turned[np.lexsort(turned.T[::-1])]
 
 
 def unique_edges(triangles: np.ndarray) -> np.ndarray:

@@ -338,3 +338,64 @@ def test_only_coarse_zones_off_target_are_balanced_without_resampling(monkeypatc
     assert len(measured) == len(regions)  # the regions tile the star: the base zone has no area
     for got, want in measured:
         assert abs(got - want) <= 0.02, (pattern.calibrated_densities, targets)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_zones_are_each_region_minus_later_ones_overlapping_or_touching(seed):
+    """DensityMap.zones: region k's zone is region k inside the area minus every later region
+    (whether it overlaps, touches or is apart), the base the rest; the zones tile the area."""
+    from DelaunayInfill.density import DensityMap
+
+    rng = np.random.default_rng(seed)
+    area = star()
+    regions = [(p, 0.3) for p, _ in star_regions()]  # touching along their borders
+    regions.append((Point(rng.uniform(-5, 5), rng.uniform(-5, 5)).buffer(12), 0.5))  # overlaps several
+    regions.append((box(-70, -70, -60, -60), 0.6))  # outside the area
+    regions.insert(2, (box(-10, -10, 10, 10), 0.4))  # overlapped by a later one
+    zones = DensityMap.create(0.2, regions).zones(area)
+    later = None
+    for k in range(len(regions) - 1, -1, -1):
+        want = regions[k][0].intersection(area)
+        if later is not None:
+            want = want.difference(later)
+        later = regions[k][0] if later is None else unary_union([later, regions[k][0]])
+        assert zones[k + 1].symmetric_difference(want).area < 1e-9
+    assert zones[0].symmetric_difference(area.difference(later)).area < 1e-9
+    assert abs(sum(z.area for z in zones) - area.area) < 1e-9
+    assert zones[-1].is_empty and zones[3].area < box(-10, -10, 10, 10).area
+
+
+def test_zone_interiors_drop_a_band_along_borders_with_other_zones_only():
+    """_zone_interiors: each zone loses the points within a line width of another zone (not of
+    the outline), as cutting the whole rest of the area would give; a zone the band would
+    (nearly) swallow, or a strip narrower than 1.4 widths, is kept whole."""
+    from DelaunayInfill.geometry import to_multipolygon
+    from DelaunayInfill.pattern import _zone_interiors
+
+    width = 0.4
+    area = box(0, 0, 60, 40)
+    left, right = box(0, 0, 30, 40), box(30, 0, 60, 40)
+    strip = box(0, 0, 60, 0.5)  # between the outline and the other zones
+    zones = [to_multipolygon(z) for z in (left.difference(strip), right.difference(strip), strip)]
+    inner = _zone_interiors(zones, width, area)
+    for k in range(2):
+        others = area.difference(zones[k])
+        want = zones[k].difference(others.buffer(width, 4))
+        assert inner[k].symmetric_difference(want).area < 1e-9
+        assert abs(inner[k].area - (zones[k].area - width * (39.5 + 30) + width**2)) < 1e-6  # bands on 2 sides
+    assert inner[2].equals(zones[2])  # narrow strip: whole
+    # The same strip wider than 1.4 widths but swallowed by bands along both long sides: whole too.
+    strip = box(0, 10, 60, 11)
+    zones = [to_multipolygon(z) for z in (box(0, 0, 60, 10), strip, box(0, 11, 60, 40))]
+    assert _zone_interiors(zones, width, area)[1].equals(zones[1])
+    # A strip narrower than 1.4 widths mostly along the outline (its band would take 15 %): whole.
+    tower = box(0, 0.5, 10, 40)
+    strip = box(0, 0, 60, 0.5)
+    zones = [to_multipolygon(strip), to_multipolygon(tower)]
+    inner = _zone_interiors(zones, width, unary_union([strip, tower]))
+    assert inner[0].equals(zones[0])
+    assert abs(inner[1].area - (tower.area - width * 10)) < 1e-6  # the tower loses its band
+    # Zones that do not tile an area: the others are their union.
+    apart = [to_multipolygon(box(0, 0, 10, 10)), to_multipolygon(box(10, 0, 20, 10))]
+    inner = _zone_interiors(apart, width)
+    assert abs(inner[0].area - (100 - 10 * width)) < 1e-6

@@ -5,6 +5,8 @@ from shapely.geometry import box
 
 from DelaunayInfill import InfillPattern, sample_poisson_disk
 from DelaunayInfill.triangulation import (
+    GrowingDelaunay,
+    canonical_triangles,
     delaunay_triangles,
     lop_violations,
     relax_points,
@@ -85,3 +87,28 @@ def test_unique_edges_are_the_sorted_distinct_vertex_pairs():
     assert got.dtype == np.intp
     assert np.array_equal(got, want)
     assert unique_edges(np.zeros((0, 3), dtype=np.intp)).shape == (0, 2)
+
+
+def test_growing_delaunay_is_the_delaunay_of_all_points_so_far():
+    """Points added in rounds: the same triangles as triangulating them all at once, counter-clockwise."""
+    rng = np.random.default_rng(3)
+    pts = sample_poisson_disk(box(0, 0, 40, 40), 2.5, seed=2)
+    growing = GrowingDelaunay(pts)
+    for _ in range(3):
+        pts = np.r_[pts, rng.uniform(0, 40, (7, 2))]
+        tri = growing.add(pts[-7:])
+        want = delaunay_triangles(pts)
+        assert np.array_equal(canonical_triangles(tri), canonical_triangles(want))
+        a, b, c = (pts[tri[:, k]] for k in range(3))
+        assert (((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]) > 0).all()
+    assert np.array_equal(growing.add(np.zeros((0, 2))), tri)
+
+
+def test_canonical_triangles_ignore_order_and_starting_corner():
+    tri = delaunay_triangles(sample_poisson_disk(box(0, 0, 30, 30), 2.0, seed=4))
+    rng = np.random.default_rng(0)
+    shuffled = np.roll(tri[rng.permutation(len(tri))], 1, axis=1)  # other order, other first corner
+    canon = canonical_triangles(shuffled)
+    assert np.array_equal(canon, canonical_triangles(tri))
+    assert (canon[:, 0] < canon[:, 1:].min(axis=1)).all()  # smallest index first
+    assert {tuple(np.roll(t, -int(np.argmin(t)))) for t in tri.tolist()} == set(map(tuple, canon.tolist()))

@@ -108,7 +108,17 @@ def polygons_of(geometry: BaseGeometry | None) -> list[Polygon]:
 
 
 def to_multipolygon(geometry: BaseGeometry | None) -> MultiPolygon:
-    """The polygonal part of `geometry` as a MultiPolygon (possibly empty)."""
+    """The polygonal part of `geometry` as a MultiPolygon (possibly empty).
+
+    A MultiPolygon of non-empty parts comes back as it is (geometries are immutable; building a
+    copy of a detailed area costs more than the step that made it).
+    """
+    if isinstance(geometry, MultiPolygon) and not geometry.is_empty:
+        if SHAPELY2:
+            if not shapely.is_empty(shapely.get_parts(geometry)).any():
+                return geometry
+        elif not any(part.is_empty for part in geometry.geoms):  # pragma: no cover - shapely 1.8
+            return geometry
     return MultiPolygon(polygons_of(geometry))
 
 

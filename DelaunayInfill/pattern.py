@@ -28,7 +28,7 @@ from scipy.spatial import QhullError, cKDTree
 from .decomposition import decompose_convex
 from .density import KAPPA, DensityMap, check_line_width, paper_radius
 from .geometry import as_area, boundary_segments, box, contains_xy, polygons_of, to_multipolygon, unary_union
-from .routing import chain_segments, clip_segments, odd_vertex_count, order_paths
+from .routing import chain_segments, clip_segments, odd_vertex_count, order_paths, split_segments
 from .sampling import sample_poisson_disk
 from .triangulation import (
     GrowingDelaunay,
@@ -90,7 +90,7 @@ class _ZoneMeter:
         edges = np.concatenate(edges) if edges else np.zeros((0, 2, 2))
         self.edges, self.tree = edges, None
         if len(edges):
-            self.edges, _ = _split_segments(edges, piece)
+            self.edges, _ = split_segments(edges, piece)
             self.tree = cKDTree(self.edges.mean(axis=1))
 
     def inside_all(self, segments: np.ndarray) -> np.ndarray:
@@ -121,7 +121,7 @@ class _ZoneMeter:
             return out
         # Long segments near a boundary: split into short pieces first, most of which are
         # then sure; the few left are cut against nearby boundary edges only.
-        pieces, source = _split_segments(segments[unsure], 2.0 * self.piece)
+        pieces, source = split_segments(segments[unsure], 2.0 * self.piece)
         plen = np.hypot(*(pieces[:, 1] - pieces[:, 0]).T)
         pmid = 0.5 * (pieces[:, 0] + pieces[:, 1])
         reach = 0.5 * self.piece + 0.5 * float(plen.max()) + 1e-3
@@ -201,16 +201,6 @@ class _ZoneMeter:
 def _quick_tree(points: np.ndarray) -> cKDTree:
     """A k-d tree built for a few queries: midpoint splits build faster than median ones."""
     return cKDTree(points, balanced_tree=False, compact_nodes=False)
-
-
-def _split_segments(segments: np.ndarray, longest: float) -> tuple[np.ndarray, np.ndarray]:
-    """Segments (m, 2, 2) cut into equal pieces at most `longest` mm; returns (pieces, source index)."""
-    d = segments[:, 1] - segments[:, 0]
-    n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / longest).astype(np.int64))
-    seg = np.repeat(np.arange(len(segments)), n)
-    k = np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n)
-    t0, t1 = (k / n[seg])[:, None], ((k + 1) / n[seg])[:, None]
-    return np.stack([segments[seg, 0] + d[seg] * t0, segments[seg, 0] + d[seg] * t1], axis=1), seg
 
 
 @dataclass

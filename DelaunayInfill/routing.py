@@ -32,18 +32,20 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def _subdivide(segments: np.ndarray, max_length: float) -> np.ndarray:
-    """Split segments longer than `max_length` into equal pieces; shape (k', 2, 2)."""
-    length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
-    pieces = np.maximum(1, np.ceil(length / max_length)).astype(np.int64)
-    seg = np.repeat(np.arange(len(segments)), pieces)
-    first = np.repeat(np.cumsum(pieces) - pieces, pieces)
-    k = np.arange(len(seg)) - first
-    n = pieces[seg]
-    a, b = segments[seg, 0], segments[seg, 1]
-    t0 = (k / n)[:, None]
-    t1 = ((k + 1) / n)[:, None]
-    return np.stack([a + (b - a) * t0, a + (b - a) * t1], axis=1)
+def split_segments(segments: np.ndarray, longest: float) -> tuple[np.ndarray, np.ndarray]:
+    """Segments (m, 2, 2) cut into equal pieces at most `longest` mm long.
+
+    Returns
+    -------
+    (ndarray, shape (k, 2, 2), ndarray of int, shape (k,))
+        The pieces, in order, and the index of the segment each comes from.
+    """
+    d = segments[:, 1] - segments[:, 0]
+    n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / longest).astype(np.int64))
+    seg = np.repeat(np.arange(len(segments)), n)
+    k = np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n)
+    t0, t1 = (k / n[seg])[:, None], ((k + 1) / n[seg])[:, None]
+    return np.stack([segments[seg, 0] + d[seg] * t0, segments[seg, 0] + d[seg] * t1], axis=1), seg
 
 
 _BOUNDARIES: dict[int, tuple] = {}  # id(area) -> (area, its boundary segments): areas are clipped against repeatedly
@@ -118,7 +120,7 @@ def clip_segments(segments: np.ndarray, area, *, return_index: bool = False):
     ia = np.zeros(0, np.intp)
     ta = np.zeros(0)
     if len(boundary) and longest > 0:
-        boundary = _subdivide(boundary, max(longest, 1e-3))
+        boundary, _ = split_segments(boundary, max(longest, 1e-3))
         pairs = None
         if len(segments) * len(boundary) <= _BRUTE_FORCE_PAIRS:
             # Few pairs: test them all.  Pairs the box sweep or the k-d trees would skip cannot

@@ -451,7 +451,7 @@ class _Run:
                         self.time_delta += dt
             self.prev_z = parse.z
         if words is not None and parse.number is not None and not failed:
-            self._record(repeat_key, text, words, parse, state_before, totals_before, edits, changed)
+            self._record(repeat_key, text, words, parse, state_before, totals_before, edits)
         if time_lines and self.time_delta != 0.0:
             if not changed:
                 lines = list(lines)
@@ -493,9 +493,9 @@ class _Run:
         return [r.at(z_slice).wkb for r in self.user_regions]
 
     def _record(self, key, text, words, parse: LayerParse, state_before: MachineState, totals_before: tuple,
-                edits: list, changed: bool) -> None:
+                edits: list) -> None:
         record = record_layer(text, words, parse.lines, state_before, parse.end_state, parse.z, edits,
-                              parse.time_elapsed_lines, changed, RetractionModel(**vars(self.retraction)))
+                              parse.time_elapsed_lines, RetractionModel(**vars(self.retraction)))
         if record is None:
             return
         counted0, e_before0, e_delta0, tally0, time0 = totals_before

@@ -135,7 +135,7 @@ class LayerRecord:
 
     ``values`` the recorded layer's word numbers (`LayerWords`); ``e_start``/``z_start`` the E register
     and Z before it; ``end`` the machine state after it; ``layer_z`` its height; ``time_lines`` its
-    ``;TIME_ELAPSED:`` lines; ``changed`` whether its text changed besides those; ``extra`` the caller's
+    ``;TIME_ELAPSED:`` lines; ``blocks`` its new FILL blocks (none: its text stays); ``extra`` the caller's
     (totals to add again, the retraction model after the layer, the regions' sections).
     """
 
@@ -148,7 +148,6 @@ class LayerRecord:
     layer_z: float
     blocks: list[BlockEdit]
     time_lines: list[int]
-    changed: bool
     retraction_after: RetractionModel
     extra: dict = field(default_factory=dict)
 
@@ -189,7 +188,6 @@ def record_layer(
     layer_z: float,
     edits: list[tuple[int, int, list[str], MachineState, MachineState]],
     time_lines: list[int],
-    changed: bool,
     retraction_after: RetractionModel,
 ) -> LayerRecord | None:
     """A record of a processed layer, or None when its repeats could not be written from it.
@@ -201,7 +199,6 @@ def record_layer(
     layer_z : float, mm.
     edits : list of (start, stop, new lines, state before, state after), one per replaced FILL block.
     time_lines : indices of the chunk's ``;TIME_ELAPSED:`` lines.
-    changed : bool, whether the layer's text changed (apart from ``;TIME_ELAPSED:``).
     retraction_after : RetractionModel after the layer.
     """
     if state_before.relative_xyz or end.relative_xyz or state_before.relative_e != end.relative_e:
@@ -241,7 +238,7 @@ def record_layer(
             return None  # written in a way `render` does not reproduce
         blocks.append(edit)
     return LayerRecord(words.values, words.is_e, relative, state_before.e, state_before.z, end.copy(), layer_z,
-                       blocks, list(time_lines), changed, retraction_after)
+                       blocks, list(time_lines), retraction_after)
 
 
 def replay_layer(

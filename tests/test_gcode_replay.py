@@ -175,8 +175,11 @@ def test_layer_words_ignore_only_z_e_and_the_counters():
 
 
 def test_block_edit_moves_e_and_z_words_and_sets_the_register_after_it():
-    lines = ["G0 F300 Z0.8", "G1 F3000 X10.000 Y10.000 E100.12345", "G1 F1500 E99.32345", "G92 E98.5", "G1 F9000"]
+    lines = ["M106 S127 ;fan 50%", "G0 F300 Z0.8", "G1 F3000 X10.000 Y10.000 E100.12340", "G1 F1500 E99.32345",
+             "G92 E98.5", "G1 F9000"]
     edit = BlockEdit(3, 9, lines, e_before=100.0, e_word_before=1, e_word_after=4)
     assert edit.render(0, 0.0, 98.5) == "\n".join(lines)
     assert edit.render(250_000, 0.2, 101.0).split("\n") == [
-        "G0 F300 Z1", "G1 F3000 X10.000 Y10.000 E102.62345", "G1 F1500 E101.82345", "G92 E101", "G1 F9000"]
+        "M106 S127 ;fan 50%", "G0 F300 Z1", "G1 F3000 X10.000 Y10.000 E102.62340", "G1 F1500 E101.82345", "G92 E101",
+        "G1 F9000"]
+    assert BlockEdit(3, 4, ["G0 X1 Y2"], 0.0, 0, 0).render(5, 0.2, 1.0) == "G0 X1 Y2"

@@ -93,40 +93,54 @@ class BlockEdit:
         self.e_word_before, self.e_word_after = e_word_before, e_word_after
         self.empty = not lines
         parts = _WORD.split("\n".join(lines))
-        self.parts = parts
-        self.e_at: list[int] = []  # parts index of each E word that the E register moves
-        self.e_fixed: list[bool] = []  # written with five decimals always (an extrusion), else as `fmt`
-        e_units: list[int] = []
-        self.z_at: list[int] = []
-        self.z_values: list[float] = []
-        self.g92_at: list[int] = []  # parts index of each "G92 E" word: set to the layer's own E register
-        for i in range(1, len(parts), 2):
-            word = parts[i]
-            line_head = parts[i - 1][parts[i - 1].rfind("\n") + 1 :]
+        # The block as one %-format: each word a placeholder, so `render` writes it in one call.
+        # An extrusion's E has five decimals always ("%.5f" of the register, as the emitter writes
+        # it); retraction/prime E, Z and G92 E are written by `fmt` (placeholders "%s").
+        literal = [p.replace("%", "%%") for p in parts[::2]]
+        placeholders = []
+        fixed, loose, e_units = [], [], []  # word indices: extrusion E / retraction E; their units 1e-5
+        z_at, z_values, g92_at = [], [], []
+        for w in range(len(parts) // 2):
+            word, before = parts[2 * w + 1], parts[2 * w]
+            line_head = before[before.rfind("\n") + 1 :]
             if word[0] == "Z":
-                self.z_at.append(i)
-                self.z_values.append(float(word[1:]))
+                z_at.append(w)
+                z_values.append(float(word[1:]))
+                placeholders.append(" Z%s")
             elif line_head.startswith("G92"):
-                self.g92_at.append(i)
+                g92_at.append(w)
+                placeholders.append(" E%s")
             else:
-                self.e_at.append(i)
-                self.e_fixed.append("X" in line_head or "Y" in line_head)
+                is_fixed = "X" in line_head or "Y" in line_head
+                (fixed if is_fixed else loose).append(w)
                 e_units.append(round(float(word[1:]) * 100000))
+                placeholders.append(" E%.5f" if is_fixed else " E%s")
+        self.template = "".join(lit + ph for lit, ph in zip(literal, placeholders)) + literal[-1]
+        self.words = len(placeholders)
+        # the E words in text order (their units in e_units): which of them are extrusions
+        self.e_at = np.array(sorted(fixed + loose), dtype=np.intp)
         self.e_units = np.array(e_units, dtype=np.int64)
-        # every word is in one of the lists above: `render` writes each one back
+        is_fixed = np.zeros(len(e_units), dtype=bool)
+        is_fixed[np.searchsorted(self.e_at, np.array(fixed, dtype=np.intp))] = True
+        self.e_fixed = is_fixed
+        self.e_loose_at = self.e_at[~is_fixed]
+        self.z_at, self.z_values, self.g92_at = z_at, z_values, g92_at
 
     def render(self, e_shift_units: int, z_shift: float, e_after: float) -> str:
         """The block's text with E words moved by `e_shift_units` (1e-5 E), Z words by `z_shift` mm."""
-        parts = list(self.parts)
-        if self.e_at:
-            for i, units, fixed in zip(self.e_at, (self.e_units + e_shift_units).tolist(), self.e_fixed, strict=True):
-                value = units / 100000
-                parts[i] = f" E{value:.5f}" if fixed else f" E{fmt(value, 5)}"
-        for i, z in zip(self.z_at, self.z_values, strict=True):
-            parts[i] = f" Z{fmt(z + z_shift, 3)}"
-        for i in self.g92_at:
-            parts[i] = f" E{fmt(e_after, 5)}"
-        return "".join(parts)
+        if not self.words:
+            return self.template % ()
+        args = np.empty(self.words, dtype=object)
+        if len(self.e_at):
+            values = (self.e_units + e_shift_units) / 100000
+            args[self.e_at] = values
+            if len(self.e_loose_at):
+                args[self.e_loose_at] = [fmt(v, 5) for v in values[~self.e_fixed].tolist()]
+        for w, z in zip(self.z_at, self.z_values, strict=True):
+            args[w] = fmt(z + z_shift, 3)
+        if self.g92_at:
+            args[self.g92_at] = fmt(e_after, 5)
+        return self.template % tuple(args.tolist())
 
 
 @dataclass

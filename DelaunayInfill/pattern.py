@@ -51,6 +51,7 @@ _LOOP_TOLERANCE = 0.003  # several zones: the loop stops within 0.3 points (bala
 _SLIVER = 1.5  # hull triangles with a circumradius above 1.5 r are not part of the pattern
 _COARSE = 36.0  # several zones: a zone under this many squared radii is only balanced once off target
 _THIN = 1.4  # zone interiors: a zone of mean width under this many line widths is kept whole
+_FEW = 48  # zone meter: up to this many pieces to cut query the edges' tree (no tree of their own)
 
 
 def segment_length(segments: np.ndarray) -> float:
@@ -85,6 +86,7 @@ class _ZoneMeter:
         self.present = [k for k, zone in enumerate(zones) if not zone.is_empty and zone.area > 0]
         self.bounds = {k: zones[k].bounds for k in self.present}
         corners = np.array(list(self.bounds.values()), dtype=float).reshape(-1, 4)
+        self.boxes = corners  # (present, 4): x0, y0, x1, y1 of each zone present
         self.extent = (*corners[:, :2].min(axis=0), *corners[:, 2:].max(axis=0)) if len(corners) else None
         edges = [boundary_segments(zones[k]) for k in self.present]
         edges = np.concatenate(edges) if edges else np.zeros((0, 2, 2))
@@ -92,6 +94,7 @@ class _ZoneMeter:
         if len(edges):
             self.edges, _ = split_segments(edges, piece)
             self.tree = cKDTree(self.edges.mean(axis=1))
+        self.edge_dirs = self.edges[:, 1] - self.edges[:, 0]  # (pieces, 2): `_cut` reads them per pair
 
     def inside_all(self, segments: np.ndarray) -> np.ndarray:
         """Length (mm) of each segment (m, 2, 2) inside each zone, shape (zones, m)."""
@@ -115,8 +118,8 @@ class _ZoneMeter:
         sure_idx = np.flatnonzero(sure)
         unsure = np.flatnonzero(~sure)
         if unsure.size == 0:
-            for k in self.present:
-                hit = sure_idx[self._contains(k, mid[sure_idx])]
+            for k, hit in self._hits(mid[sure_idx]):
+                hit = sure_idx[hit]
                 out[k, hit] = length[hit]
             return out
         # Long segments near a boundary: split into short pieces first, most of which are
@@ -130,18 +133,32 @@ class _ZoneMeter:
         sub_source, sub_length, sub_mid = source[far], plen[far], pmid[far]
         if close.size:
             sid, sub, smid = self._cut(pieces[close], plen[close])
-            sub_source = np.r_[sub_source, source[close][sid]]
-            sub_length = np.r_[sub_length, sub]
-            sub_mid = np.r_[sub_mid, smid]
+            sub_source = np.concatenate((sub_source, source[close][sid]))
+            sub_length = np.concatenate((sub_length, sub))
+            sub_mid = np.concatenate((sub_mid, smid))
         # One point-in-zone test per zone for the sure midpoints and the pieces' together.
         tested = np.concatenate((mid[sure_idx], sub_mid))
-        for k in self.present:
-            hit = self._contains(k, tested)
+        for k, hit in self._hits(tested):
             split = np.searchsorted(hit, sure_idx.size)
             out[k, sure_idx[hit[:split]]] = length[sure_idx[hit[:split]]]
             hit = hit[split:] - sure_idx.size
             out[k, unsure] = np.bincount(sub_source[hit], sub_length[hit], unsure.size)
         return out
+
+    def _hits(self, xy: np.ndarray):
+        """Yield (zone index, indices of the points (m, 2) inside it, ascending) for each zone
+        whose bounding box holds any of the points (the others hold none of them).
+
+        One bounding-box test for all zones at once; only the points in a zone's box are
+        tested against the zone.
+        """
+        x, y = xy[:, 0], xy[:, 1]
+        box_of = self.boxes
+        in_box = (x >= box_of[:, 0:1]) & (x <= box_of[:, 2:3]) & (y >= box_of[:, 1:2]) & (y <= box_of[:, 3:4])
+        for row in np.flatnonzero(in_box.any(axis=1)):
+            k = self.present[row]
+            near = np.flatnonzero(in_box[row])
+            yield k, near[contains_xy(self.zones[k], x[near], y[near])]
 
     def _contains(self, k: int, xy: np.ndarray) -> np.ndarray:
         """Indices of the points (m, 2) inside zone k, shape (h,) ascending.
@@ -164,12 +181,21 @@ class _ZoneMeter:
         -------
         (segment index, length, midpoint) of every sub-segment: (s,), (s,), (s, 2).
         """
-        edges = self.edges
         reach = 0.5 * (float(length.max()) + self.piece) + 1e-6
-        sdm = _quick_tree(segments.mean(axis=1)).sparse_distance_matrix(self.tree, reach, output_type="ndarray")
-        ia, ib = sdm["i"].astype(np.intp), sdm["j"].astype(np.intp)
-        p, r = segments[ia, 0], segments[ia, 1] - segments[ia, 0]
-        q, e = edges[ib, 0], edges[ib, 1] - edges[ib, 0]
+        # Every pair within reach (a crossing pair is nearer by far more than rounding): a few
+        # segments are looked up in the edges' tree, many get a tree of their own.
+        m = len(segments)
+        if m <= _FEW:
+            found = self.tree.query_ball_point(segments.mean(axis=1), reach)
+            ia = np.repeat(np.arange(m), [len(f) for f in found])
+            ib = np.array([j for f in found for j in f], dtype=np.intp)
+        else:
+            sdm = _quick_tree(segments.mean(axis=1)).sparse_distance_matrix(self.tree, reach, output_type="ndarray")
+            ia, ib = sdm["i"].astype(np.intp), sdm["j"].astype(np.intp)
+        pair = segments[ia]  # one gather per side (the pairs outnumber the segments)
+        p = pair[:, 0]
+        r = pair[:, 1] - p
+        q, e = self.edges[ib, 0], self.edge_dirs[ib]
         denom = r[:, 0] * e[:, 1] - r[:, 1] * e[:, 0]
         ok = np.abs(denom) > 1e-15
         safe = np.where(ok, denom, 1.0)
@@ -177,9 +203,8 @@ class _ZoneMeter:
         t = (qp[:, 0] * e[:, 1] - qp[:, 1] * e[:, 0]) / safe
         u = (qp[:, 0] * r[:, 1] - qp[:, 1] * r[:, 0]) / safe
         cross = ok & (t > 1e-9) & (t < 1 - 1e-9) & (u >= -1e-9) & (u <= 1 + 1e-9)
-        m = len(segments)
-        seg_id = np.r_[np.arange(m), np.arange(m), ia[cross]]
-        param = np.r_[np.zeros(m), np.ones(m), t[cross]]
+        seg_id = np.concatenate((np.arange(m), np.arange(m), ia[cross]))
+        param = np.concatenate((np.zeros(m), np.ones(m), t[cross]))
         order = np.lexsort((param, seg_id))
         seg_id, param = seg_id[order], param[order]
         same = seg_id[1:] == seg_id[:-1]
@@ -661,14 +686,14 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
         ok = np.abs(d) > 1e-12
         d = np.where(ok, d, 1.0)
         sa, sb, sc = ((p * p).sum(axis=1) for p in (a, b, c))
-        center = np.c_[
+        center = np.stack((
             (sa * (b[:, 1] - c[:, 1]) + sb * (c[:, 1] - a[:, 1]) + sc * (a[:, 1] - b[:, 1])) / d,
             (sa * (c[:, 0] - b[:, 0]) + sb * (a[:, 0] - c[:, 0]) + sc * (b[:, 0] - a[:, 0])) / d,
-        ]
+        ), axis=1)
         radius = np.where(ok, np.hypot(*(center - a).T), 0.0)
         added = []
         for k in short:
-            inside = np.flatnonzero(contains_xy(meter.zones[k], center[:, 0], center[:, 1]))
+            inside = meter._contains(k, center)  # ascending, as flatnonzero of the full test
             if inside.size == 0:
                 continue
             # About 3 circumradii of line per insertion; at most a third of
@@ -688,7 +713,7 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
                 triangles = growing.add(added)
             except (QhullError, ValueError):  # qhull refuses: triangulate afresh (and start over next round)
                 growing = None
-        points = np.r_[points, added]
+        points = np.concatenate((points, added))
         if triangles is None:
             triangles = delaunay_triangles(points)
     else:
@@ -725,7 +750,7 @@ def _thin_dense_zones(points, triangles, meter, targets, width, small, known=Non
     # (-1 on the hull), from one sort of the triangles' sides by vertex pair.
     n = len(points)
     t = np.asarray(triangles, dtype=np.int64)
-    u, v = t.ravel(), np.roll(t, -1, axis=1).ravel()  # side k of triangle i at 3 i + k
+    u, v = t.ravel(), t[:, [1, 2, 0]].ravel()  # side k of triangle i at 3 i + k
     side_key = np.minimum(u, v) * n + np.maximum(u, v)
     order = np.argsort(side_key, kind="stable")
     sorted_key = side_key[order]
@@ -739,10 +764,13 @@ def _thin_dense_zones(points, triangles, meter, targets, width, small, known=Non
     owners[edge_of[~first], 1] = order[~first] // 3
     segments = points[edges]
     keep = np.ones(len(edges), dtype=bool)
-    opened = np.zeros(len(triangles) + 1, dtype=bool)  # last slot stands for "no triangle"
+    opened = set()  # triangles with an edge left out
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
     # Length of every edge inside every zone: leaving edges out does not change it.
     inside_of = _inside_lengths(edges, segments, meter, {} if known is None else known)
+    # Edges at each vertex, kept up to date as edges are left out (plain ints: the walk below
+    # is sequential, and plain Python numbers are cheaper there than numpy scalars).
+    degree = np.bincount(edges.ravel(), minlength=n).tolist()
     for k, (zone, target, thin) in enumerate(zip(meter.zones, targets, small)):
         if not thin or zone.is_empty or zone.area <= 0:
             continue
@@ -752,19 +780,25 @@ def _thin_dense_zones(points, triangles, meter, targets, width, small, known=Non
             continue
         candidates = np.flatnonzero(keep & (inside >= 0.5 * length))
         candidates = candidates[np.argsort(-length[candidates])]
-        degree = np.bincount(edges[keep].ravel(), minlength=n)
+        ends, sides = edges[candidates].tolist(), owners[candidates].tolist()
+        pieces = inside[candidates].tolist()
+        excess = float(excess)
+        left_out, taken = [], [False] * len(pieces)
         # First one edge per triangle; then any edge that leaves no loose end.
         for strict in (True, False):
-            for e in candidates:
-                if excess - 0.5 * inside[e] <= 0:
+            for i, ((a, b), (one, other), piece) in enumerate(zip(ends, sides, pieces)):
+                if excess - 0.5 * piece <= 0:
                     break
-                if not keep[e] or (strict and opened[owners[e]].any()) or degree[edges[e]].min() <= 2:
+                if taken[i] or (strict and (one in opened or other in opened)) or min(degree[a], degree[b]) <= 2:
                     continue
-                keep[e] = False
-                degree[edges[e]] -= 1
-                opened[owners[e]] = True
-                opened[-1] = False
-                excess -= inside[e]
+                left_out.append(i)
+                taken[i] = True
+                degree[a] -= 1
+                degree[b] -= 1
+                opened.update((one, other))
+                opened.discard(-1)  # -1: no triangle on that side
+                excess -= piece
+        keep[candidates[left_out]] = False
     measured = [float(inside_of[k][keep].sum()) * width / z.area if z.area > 0 else float("nan")
                 for k, z in enumerate(meter.zones)]
     return segments[keep], measured
@@ -786,6 +820,9 @@ def _inside_lengths(edges, segments, meter, known: dict) -> np.ndarray:
     new = np.flatnonzero(~hit)
     if new.size:
         values[:, new] = meter.inside_all(segments[new])
+    if np.all(key[1:] > key[:-1]):  # as `_thin_dense_zones` lists them: sorted already
+        known["keys"], known["values"] = key, values
+        return values
     order = np.argsort(key, kind="stable")
     known["keys"], known["values"] = key[order], values[:, order]
     return values

@@ -266,6 +266,30 @@ def test_zone_meter_measures_like_clipping(seed):
         assert meter.densities(segments, 0.4)[k] == pytest.approx(exact, rel=1e-9, abs=1e-12)
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_zone_meter_cuts_a_few_segments_as_it_cuts_many(seed, monkeypatch):
+    """A few segments at a time (balancing's new edges: pairs found in the edges' tree) measure
+    bit for bit as through the many-segment path (a tree of their own), and as clipping does."""
+    from DelaunayInfill import pattern as pattern_module
+    from DelaunayInfill.pattern import _ZoneMeter
+
+    rng = np.random.default_rng(seed)
+    zones = [star(), *[p for p, _ in star_regions()], box(-5, -5, 5, 5).difference(Point(0, 0).buffer(2))]
+    starts = rng.uniform(-35, 35, (240, 2))
+    ends = starts + rng.normal(0, 4, (240, 2))
+    segments = np.stack([starts, ends], axis=1)
+    meter = _ZoneMeter(zones)
+    chunks = np.array_split(segments, 60)  # 4 segments a call
+    measured = {}
+    for few in (0, 10**6):
+        monkeypatch.setattr(pattern_module, "_FEW", few)
+        measured[few] = np.concatenate([meter.inside_all(chunk) for chunk in chunks], axis=1)
+    assert np.array_equal(measured[0], measured[10**6])
+    for k, zone in enumerate(zones):
+        exact = measured_density(segments, zone, 0.4) * zone.area / 0.4
+        assert measured[10**6][k].sum() == pytest.approx(exact, rel=1e-9, abs=1e-12)
+
+
 def test_balancing_cache_measures_like_a_fresh_meter():
     """Edge lengths cached between balancing rounds (points appended) equal a fresh measurement."""
     from DelaunayInfill.pattern import _inside_lengths, _ZoneMeter

@@ -43,7 +43,15 @@ from .read import (
     iter_file_chunks,
     parse_layer,
 )
-from .replay import LayerRecord, LayerWords, RepeatCache, layer_words, record_layer, replay_layer
+from .replay import (
+    LayerRecord,
+    LayerWords,
+    RepeatCache,
+    layer_words,
+    record_layer,
+    replay_layer,
+    shifted_time_line,
+)
 from .settings import MeshSettings, ProcessReport, ProcessSettings, Region, RegionReport
 
 __all__ = [
@@ -456,8 +464,7 @@ class _Run:
             if not changed:
                 lines = list(lines)
             for i in time_lines:
-                old = float(lines[i][14:].strip() or 0)
-                lines[i] = f";TIME_ELAPSED:{old + self.time_delta:.6f}"
+                lines[i] = shifted_time_line(lines[i], self.time_delta)
             changed = True
         return "\n".join(lines) if changed else text
 

@@ -28,7 +28,8 @@ import numpy as np
 from .emit import fmt
 from .read import MachineState, RetractionModel
 
-__all__ = ["LayerWords", "BlockEdit", "LayerRecord", "RepeatCache", "layer_words", "record_layer", "replay_layer"]
+__all__ = ["LayerWords", "BlockEdit", "LayerRecord", "RepeatCache", "layer_words", "record_layer", "replay_layer",
+           "shifted_time_line"]
 
 # an E or Z word (with the space before it, which `split` drops): the numbers a repeated layer changes
 _WORD = re.compile(r" ([EZ]-?[\d.]+)")
@@ -186,6 +187,11 @@ class RepeatCache:
             self._records.popitem(last=False)
 
 
+def shifted_time_line(line: str, delta: float) -> str:
+    """A ``;TIME_ELAPSED:`` line with `delta` seconds added (how every rewritten one is written)."""
+    return f";TIME_ELAPSED:{float(line[14:].strip() or 0) + delta:.6f}"
+
+
 def _register_at(words: LayerWords, count: int, start: float) -> float:
     """The E register after the layer's first `count` E words (`start`: before the layer)."""
     if count == 0:
@@ -275,8 +281,7 @@ def replay_layer(
         return None
     lines = text.split("\n")
     for i in record.time_lines:
-        old = float(lines[i][14:].strip() or 0)
-        lines[i] = f";TIME_ELAPSED:{old + time_delta:.6f}"
+        lines[i] = shifted_time_line(lines[i], time_delta)
     out: list[str] = []
     pos = 0
     for blk in record.blocks:

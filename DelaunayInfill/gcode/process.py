@@ -457,9 +457,11 @@ class _Run:
                         lines, time_lines, edits = new_lines
                         changed = True
                         self.time_delta += dt
+            # the regions' sections the layer was processed with (at its slice height, from the layer below)
+            sections = self._region_sections(parse.z) if words is not None and self.user_regions else None
             self.prev_z = parse.z
         if words is not None and parse.number is not None and not failed:
-            self._record(repeat_key, text, words, parse, state_before, totals_before, edits)
+            self._record(repeat_key, text, words, parse, state_before, totals_before, edits, sections)
         if time_lines and self.time_delta != 0.0:
             if not changed:
                 lines = list(lines)
@@ -500,7 +502,7 @@ class _Run:
         return [r.at(z_slice).wkb for r in self.user_regions]
 
     def _record(self, key, text, words, parse: LayerParse, state_before: MachineState, totals_before: tuple,
-                edits: list) -> None:
+                edits: list, sections: list | None) -> None:
         record = record_layer(text, words, parse.lines, state_before, parse.end_state, parse.z, edits,
                               parse.time_elapsed_lines, RetractionModel(**vars(self.retraction)))
         if record is None:
@@ -515,8 +517,7 @@ class _Run:
              for k, (t, length, area) in tally1.items()},
             time1 - time0,
         )
-        if self.user_regions:
-            record.extra["regions"] = self._region_sections(parse.z)
+        record.extra["regions"] = sections
         self.repeats.put(key, record)
         # The layer has taught the run its retraction and per-mesh figures (each learned once, from
         # this layer's own lines, and used by it): the same layer met again with them gives this result.

@@ -812,6 +812,7 @@ def mesh_layer(
     overlap: float,
     fill_reach: float,
     cache: AreaCache | None = None,
+    hull_without_walls: bool = True,
 ) -> MeshLayer:
     """Rebuild one mesh's sparse-infill area in one parsed layer.
 
@@ -827,6 +828,10 @@ def mesh_layer(
     fill_reach : float
         Closing radius for the FILL hull fallback, mm (about Cura's line spacing).
     cache : AreaCache, optional
+    hull_without_walls : bool
+        Whether a mesh without walls here gets the FILL hull as its area.  An
+        infill-mesh modifier needs none: its host's area holds its part (and
+        the hull's closing is the costliest step); its area stays empty.
     """
     m = parse.moves
     extr = parse.mesh_mask(mesh) & parse.extruding()
@@ -849,7 +854,7 @@ def mesh_layer(
         for mask in (wall_mask, skin_mask, fill_mask):
             h.update(rounded[mask[used]].tobytes())
             h.update(b"|")
-        h.update(np.array([line_width, overlap, fill_reach]).tobytes())
+        h.update(np.array([line_width, overlap, fill_reach, hull_without_walls]).tobytes())
         key = h.digest()
         hit = cache.get(key)
         if hit is not None:
@@ -872,7 +877,7 @@ def mesh_layer(
     area = to_multipolygon(unary_union([p for p in polygons_of(area) if p.area > line_width * line_width]))
 
     used_hull = False
-    if len(fill) and fraction_inside(fill, area, line_width) < 0.95:
+    if len(fill) and (has_walls or hull_without_walls) and fraction_inside(fill, area, line_width) < 0.95:
         hull = fill_hull(runs_of(parse, fill_mask), line_width, fill_reach)
         if part is not None:
             hull = to_multipolygon(hull.intersection(part.buffer(line_width / 2)))

@@ -628,6 +628,7 @@ class _Run:
         geo = {}
         lw_of = {}
         overlap_of = {}
+        reach_of = {}
         for name in fill_meshes:
             lw = self._line_width(parse, name)
             lw_of[name] = lw
@@ -647,7 +648,8 @@ class _Run:
                     self.reach_density[name] = guess  # only sets a closing radius: the first estimate will do
                 guess = guess or 0.2
             reach = min(25.0, max(2 * lw, 1.5 * lw / max(guess, 0.04)))
-            geo[name] = mesh_layer(parse, name, lw, overlap, reach, self.area_cache)
+            reach_of[name] = reach
+            geo[name] = mesh_layer(parse, name, lw, overlap, reach, self.area_cache, hull_without_walls=False)
 
         # Which meshes are density regions inside another (Cura infill_mesh modifiers)?
         hosts = [n for n in fill_meshes if s.enabled(n) and geo[n].has_walls and geo[n].part is not None]
@@ -666,6 +668,9 @@ class _Run:
         normal = [n for n in fill_meshes if s.enabled(n) and n not in parent_of]
         if not normal:
             return None, 0.0, {}
+        for name in normal:
+            if not geo[name].has_walls:  # a mesh of its own without walls: its area is its FILL hull
+                geo[name] = mesh_layer(parse, name, lw_of[name], overlap_of[name], reach_of[name], self.area_cache)
 
         z_slice = self._slice_z(parse.z)
         replaced: dict[int, list[str]] = {}
@@ -931,10 +936,8 @@ class _Run:
         hit = self.modifier_areas.get(key)
         if hit is not None:
             return hit
-        host_geo = geo[host]
-        area = to_multipolygon(unary_union([host_geo.area, *(geo[c].area for c in children)]))
-        if host_geo.part is not None:
-            area = to_multipolygon(area.intersection(host_geo.part.buffer(lw / 2, 4)))
+        # The host's area (inside its walls) holds its modifiers' parts: Cura cuts them out of it.
+        area = geo[host].area
         spacings = [lw / self._cura_density(n, geo[n].fill, lw) for n in names]
         end_inset = max(0.0, lw / 2 - overlap)
         parts = split_by_line_ends(area, [geo[n].fill for n in names], spacings, end_inset, step=max(lw, 0.25))[1:]

@@ -12,7 +12,8 @@ def differences(a: str, b: str, e_tolerance: float) -> list[str]:
     """Lines where `a` and `b` differ by more than E numbers within `e_tolerance` (at most 10 listed).
 
     Everything but the E words must be equal character for character; ``;TIME_ELAPSED:`` values may
-    differ by 1e-3 s (they sum per-layer changes).
+    differ by 1e-3 s (they sum per-layer changes), the header's ``;Filament used:`` figures by 2e-5 (m
+    or mm3: the sum of every E word's rounding, written to six decimals).
     """
     la, lb = a.split("\n"), b.split("\n")
     if len(la) != len(lb):
@@ -23,6 +24,11 @@ def differences(a: str, b: str, e_tolerance: float) -> list[str]:
             continue
         if x.startswith(";TIME_ELAPSED:") and y.startswith(";TIME_ELAPSED:"):
             if abs(float(x[14:]) - float(y[14:])) <= 1e-3:
+                continue
+        elif x.startswith(";Filament used:") and y.startswith(";Filament used:"):
+            fx, fy = _NUMBER.findall(x), _NUMBER.findall(y)
+            if _NUMBER.sub("0", x) == _NUMBER.sub("0", y) and all(
+                    abs(float(p) - float(q)) <= 2e-5 for p, q in zip(fx, fy, strict=True)):
                 continue
         elif _E_WORD.sub("E", x) == _E_WORD.sub("E", y):
             ex = [float(v) for v in _E_WORD.findall(x)]

@@ -183,3 +183,16 @@ def test_block_edit_moves_e_and_z_words_and_sets_the_register_after_it():
         "M106 S127 ;fan 50%", "G0 F300 Z1", "G1 F3000 X10.000 Y10.000 E102.62340", "G1 F1500 E101.82345", "G92 E101",
         "G1 F9000"]
     assert BlockEdit(3, 4, ["G0 X1 Y2"], 0.0, 0, 0).render(5, 0.2, 1.0) == "G0 X1 Y2"
+
+
+def test_the_comparison_allows_only_rounding_in_e_and_the_header_figures():
+    """The yardstick of the tests above: E words within the tolerance, the header's filament sum
+    within its six-decimal rounding; anything else is a difference."""
+    head = ";FLAVOR:Marlin\n;Filament used: 0.046470m\n"
+    move = "G1 X20 Y10 E13.75000\n"
+    assert differences(head + move, head + "G1 X20 Y10 E13.75002\n", E_ROUNDING) == []
+    assert differences(head + move, ";FLAVOR:Marlin\n;Filament used: 0.046469m\n" + move, E_ROUNDING) == []
+    assert differences(head + move, ";FLAVOR:Marlin\n;Filament used: 0.046500m\n" + move, E_ROUNDING) != []
+    assert differences(head + move, ";FLAVOR:Marlin\n;Filament used: 0.046470mm\n" + move, E_ROUNDING) != []
+    assert differences(head + move, head + "G1 X20 Y10 E13.76000\n", E_ROUNDING) != []
+    assert differences(head + move, head + "G1 X20 Y11 E13.75000\n", E_ROUNDING) != []

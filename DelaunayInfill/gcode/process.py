@@ -51,6 +51,7 @@ from .replay import (
     record_layer,
     replay_layer,
     shifted_time_line,
+    splice_blocks,
 )
 from .settings import MeshSettings, ProcessReport, ProcessSettings, Region, RegionReport
 
@@ -334,7 +335,6 @@ class _Run:
         self.layer_densities: dict[tuple, tuple] = {}  # this layer's `infill_density` answers
         self.grown: dict[tuple, tuple] = {}
         self.inside_memo: dict[tuple, tuple] = {}
-        self.unions: dict[tuple, tuple] = {}
         self.xy_words: dict[int, tuple] = {}
         self._combing: dict[int, CombingArea] = {}  # id(part) -> its combing area (parts repeat on prisms)
         self.e_before: dict[int, float] = {}
@@ -689,21 +689,18 @@ class _Run:
                 a = r.at(z_slice)
                 if not a.is_empty:
                     region_list.append((a, r.density, r.name or f"region {k + 1}"))
-            child_areas = []
+            # Without user regions here, the regions are the modifier split's parts: disjoint, inside `area`.
+            split_parts_only = not region_list
             covered_children = set()  # modifiers whose area the host's pattern fills
             given = {r[2] for r in region_list}
+            # (the modifiers' parts are pieces of the host's area: `_modifier_areas` splits it)
             for c, ca in zip(children, self._modifier_areas(name, children, geo, lw, overlap_of[name]) if children else [], strict=True):
                 if ca.is_empty:
                     continue
                 covered_children.add(c)
                 if c in given or c.replace("\\", "/").rsplit("/", 1)[-1] in given:
-                    # the caller gave this modifier's exact mesh as a Region: keep that one only
-                    child_areas.append(ca)
-                    continue
-                child_areas.append(ca)
+                    continue  # the caller gave this modifier's exact mesh as a Region: keep that one only
                 region_list.append((ca, self._region_mesh_density(c, geo[c].fill, lw_of[c], ca), f"mesh {c}"))
-            if child_areas:
-                area = self._union([area, *child_areas])
             if area.is_empty:
                 continue
             density = self._density_of(name, g.fill, lw, area)
@@ -726,7 +723,7 @@ class _Run:
                 start = (first.x, first.y) if math.isfinite(first.x) else None
                 result = self._clip(pattern, self._line_area(area, lw, overlap_of[name]), start)
                 paths = self._paths(result, min_length=lw / 2)
-                self._measure(result, paths, area, density, used_regions, lw)
+                self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
             for part, zname in empty_parts:
                 self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
             travel_part = g.part if g.part is not None else area.buffer(lw / 2)
@@ -825,19 +822,11 @@ class _Run:
             return None, 0.0, {"blocks_kept": stats["blocks_kept"]}
         if not math.isfinite(dt):
             raise ValueError("the print-time estimate of the new moves is not finite")
-        lines = parse.lines
-        out_lines: list[str] = []
-        pos = 0
-        shifts = []  # (stop, lines added) of each replaced block
-        edits = []  # (start, stop, new lines, state before, state after) of each replaced block
-        for bi in sorted(replaced, key=lambda i: blocks[i].start):
-            blk = blocks[bi]
-            out_lines.extend(lines[pos : blk.start + 1])
-            out_lines.extend(replaced[bi])
-            pos = blk.stop
-            shifts.append((blk.stop, len(replaced[bi]) - (blk.stop - blk.start - 1)))
-            edits.append((blk.start, blk.stop, replaced[bi], blk.before, blk.after))
-        out_lines.extend(lines[pos:])
+        order = sorted(replaced, key=lambda i: blocks[i].start)
+        out_lines = splice_blocks(parse.lines, [(blocks[bi].start, blocks[bi].stop, replaced[bi]) for bi in order])
+        # (start, stop, new lines, state before, state after) of each replaced block
+        edits = [(blocks[bi].start, blocks[bi].stop, replaced[bi], blocks[bi].before, blocks[bi].after) for bi in order]
+        shifts = [(stop, len(new) - (stop - start - 1)) for start, stop, new, _, _ in edits]  # (stop, lines added)
         # ;TIME_ELAPSED: lines end blocks (never inside one): each moves by what the blocks before it add
         time_lines = [t + sum(added for stop, added in shifts if t >= stop) for t in parse.time_elapsed_lines]
         if not all(out_lines[t].startswith(";TIME_ELAPSED:") for t in time_lines):
@@ -883,17 +872,6 @@ class _Run:
             if len(self.grown) >= 64:
                 self.grown.pop(next(iter(self.grown)))
             self.grown[key] = hit
-        return hit[1]
-
-    def _union(self, areas: list):
-        """The union of areas, remembered by the objects (cached areas repeat layer after layer)."""
-        key = tuple(id(a) for a in areas)
-        hit = self.unions.get(key)
-        if hit is None or any(a is not b for a, b in zip(hit[0], areas, strict=True)):
-            hit = (list(areas), to_multipolygon(unary_union(areas)))
-            if len(self.unions) >= 32:
-                self.unions.pop(next(iter(self.unions)))
-            self.unions[key] = hit
         return hit[1]
 
     def _line_area(self, area, lw: float, overlap: float):
@@ -987,16 +965,17 @@ class _Run:
             self.result_memo[id(result)] = hit
         return hit[1]
 
-    def _zones(self, area, regions, lw):
+    def _zones(self, area, regions, lw, disjoint: bool = False):
         """Each zone's interior and its area: index k regions[k], last the base (cached per area and regions).
 
         A zone's interior leaves out a band of one line width along its border:
         along other zones the pattern changes from one density to the other
         (the engine calibrates the interiors), along the part's outline the
         lines end (like Cura's, half a line width less the overlap before it).
-        A zone the band would (nearly) swallow is measured whole.
+        A zone the band would (nearly) swallow is measured whole.  `disjoint`:
+        the regions are disjoint parts of `area` (a modifier split's), each its own part.
         """
-        key = (*_shape_key(area), tuple(id(r) for r in regions), round(lw, 4))
+        key = (*_shape_key(area), tuple(id(r) for r in regions), round(lw, 4), disjoint)
         hit = self.zone_areas.get(key)
         if hit is not None and all(a is b for a, b in zip(hit[0], regions, strict=True)):
             return hit[1]
@@ -1004,6 +983,9 @@ class _Run:
         later = None  # the union of regions[k + 1:]
         for k in range(len(regions) - 1, -1, -1):
             a = regions[k][0]
+            if disjoint:
+                owns[k] = to_multipolygon(a)
+                continue
             own = a.intersection(area)
             if later is not None:
                 own = own.difference(later)
@@ -1018,8 +1000,8 @@ class _Run:
             # `area` and their union share every border, and that difference is the slowest overlay.
             owns.append(empty_area())
         else:
-            first = regions[0][0]
-            every = first if later is None else later.union(first)
+            every = unary_union([r[0] for r in regions]) if disjoint else (
+                regions[0][0] if later is None else later.union(regions[0][0]))
             owns.append(to_multipolygon(area.difference(every)))
         inner = list(owns)
         for k, own in enumerate(owns):
@@ -1060,11 +1042,11 @@ class _Run:
         memo[key] = (zones, lengths)
         return lengths
 
-    def _measure(self, result, paths, area, base_density, regions, lw) -> None:
+    def _measure(self, result, paths, area, base_density, regions, lw, disjoint: bool = False) -> None:
         """Accumulate new infill length x line width and area per density region (later regions win)."""
         if not paths:
             return
-        zones, areas = self._zones(area, regions, lw)
+        zones, areas = self._zones(area, regions, lw, disjoint)
         lengths = self._zone_lengths(result, paths, zones, lw)
         for k, (_, dens, name) in enumerate(regions):
             self._tally(name, dens, float(lengths[k]) * lw, areas[k])

@@ -29,7 +29,7 @@ from .emit import fmt
 from .read import MachineState, RetractionModel
 
 __all__ = ["LayerWords", "BlockEdit", "LayerRecord", "RepeatCache", "layer_words", "record_layer", "replay_layer",
-           "shifted_time_line"]
+           "shifted_time_line", "splice_blocks"]
 
 # an E or Z word (with the space before it, which `split` drops): the numbers a repeated layer changes
 _WORD = re.compile(r" ([EZ]-?[\d.]+)")
@@ -192,6 +192,27 @@ def shifted_time_line(line: str, delta: float) -> str:
     return f";TIME_ELAPSED:{float(line[14:].strip() or 0) + delta:.6f}"
 
 
+def splice_blocks(lines: list[str], blocks: list[tuple[int, int, list[str]]]) -> list[str]:
+    """`lines` with each block's inner lines replaced.
+
+    Parameters
+    ----------
+    lines : list of str
+        A layer's lines.
+    blocks : list of (start, stop, new lines)
+        In order, disjoint: lines ``start + 1 .. stop - 1`` give way to the new lines (line ``start``,
+        the block's ``;TYPE:`` line, stays).
+    """
+    out: list[str] = []
+    pos = 0
+    for start, stop, new_lines in blocks:
+        out.extend(lines[pos : start + 1])
+        out.extend(new_lines)
+        pos = stop
+    out.extend(lines[pos:])
+    return out
+
+
 def _register_at(words: LayerWords, count: int, start: float) -> float:
     """The E register after the layer's first `count` E words (`start`: before the layer)."""
     if count == 0:
@@ -282,20 +303,17 @@ def replay_layer(
     lines = text.split("\n")
     for i in record.time_lines:
         lines[i] = shifted_time_line(lines[i], time_delta)
-    out: list[str] = []
-    pos = 0
+    texts = []
     for blk in record.blocks:
-        out.extend(lines[pos : blk.start + 1])
-        pos = blk.stop
         if blk.empty:
-            continue
-        if record.relative_e:
-            out.append(blk.render(0, z_shift, 0.0))
-            continue
-        e_before = _register_at(words, blk.e_word_before, state_before.e)
-        e_after = _register_at(words, blk.e_word_after, state_before.e)
-        out.append(blk.render(round((e_before - blk.e_before) * 100000), z_shift, e_after))
-    out.extend(lines[pos:])
+            texts.append((blk.start, blk.stop, []))
+        elif record.relative_e:
+            texts.append((blk.start, blk.stop, [blk.render(0, z_shift, 0.0)]))
+        else:
+            e_before = _register_at(words, blk.e_word_before, state_before.e)
+            e_after = _register_at(words, blk.e_word_after, state_before.e)
+            texts.append((blk.start, blk.stop, [blk.render(round((e_before - blk.e_before) * 100000), z_shift, e_after)]))
+    out = splice_blocks(lines, texts)
     end = record.end.copy()
     z_words = words.values[~is_e]
     end.z = float(z_words[-1]) if len(z_words) else state_before.z

@@ -123,25 +123,24 @@ class BlockEdit:
         self.e_units = np.array(e_units, dtype=np.int64)
         is_fixed = np.zeros(len(e_units), dtype=bool)
         is_fixed[np.searchsorted(self.e_at, np.array(fixed, dtype=np.intp))] = True
-        self.e_fixed = is_fixed
-        self.e_loose_at = self.e_at[~is_fixed]
-        self.z_at, self.z_values, self.g92_at = z_at, z_values, g92_at
+        self.e_loose = np.flatnonzero(~is_fixed).tolist()  # positions among the E words
+        self.z_values, self.g92_count = z_values, len(g92_at)
+        # `render` lists the E words, then the Z words, then the G92 words: where each word is in that list
+        listed = np.empty(self.words, dtype=np.intp)
+        listed[np.concatenate([self.e_at, np.array(z_at + g92_at, dtype=np.intp)]).astype(np.intp)] = np.arange(self.words)
+        self.slots = None if (listed == np.arange(self.words)).all() else listed.tolist()
 
     def render(self, e_shift_units: int, z_shift: float, e_after: float) -> str:
         """The block's text with E words moved by `e_shift_units` (1e-5 E), Z words by `z_shift` mm."""
-        if not self.words:
-            return self.template % ()
-        args = np.empty(self.words, dtype=object)
-        if len(self.e_at):
-            values = (self.e_units + e_shift_units) / 100000
-            args[self.e_at] = values
-            if len(self.e_loose_at):
-                args[self.e_loose_at] = [fmt(v, 5) for v in values[~self.e_fixed].tolist()]
-        for w, z in zip(self.z_at, self.z_values, strict=True):
-            args[w] = fmt(z + z_shift, 3)
-        if self.g92_at:
-            args[self.g92_at] = fmt(e_after, 5)
-        return self.template % tuple(args.tolist())
+        args = ((self.e_units + e_shift_units) / 100000).tolist()
+        for i in self.e_loose:
+            args[i] = fmt(args[i], 5)
+        args += [fmt(z + z_shift, 3) for z in self.z_values]
+        if self.g92_count:
+            args += [fmt(e_after, 5)] * self.g92_count
+        if self.slots is not None:
+            args = [args[i] for i in self.slots]
+        return self.template % tuple(args)
 
 
 @dataclass
@@ -213,11 +212,9 @@ def splice_blocks(lines: list[str], blocks: list[tuple[int, int, list[str]]]) ->
     return out
 
 
-def _register_at(words: LayerWords, count: int, start: float) -> float:
-    """The E register after the layer's first `count` E words (`start`: before the layer)."""
-    if count == 0:
-        return start
-    return float(words.values[words.is_e][count - 1])
+def _register_at(e_values: list[float], count: int, start: float) -> float:
+    """The E register after the layer's first `count` E words (`e_values`; `start`: before the layer)."""
+    return e_values[count - 1] if count else start
 
 
 def record_layer(
@@ -248,6 +245,7 @@ def record_layer(
         return None  # a mode change: E words would not all be registers (or all deltas)
     relative = end.relative_e
     e_values = words.values[words.is_e]
+    e_list = e_values.tolist()
     z_values = words.values[~words.is_e]
     # The words must be what the parse saw: the last E and Z words set the state after the layer.
     if not relative and (e_values[-1] if len(e_values) else state_before.e) != end.e:
@@ -268,12 +266,12 @@ def record_layer(
         else:
             e_before_count = int(np.searchsorted(e_offsets, line_start[start])) if len(e_values) else 0
             e_after_count = int(np.searchsorted(e_offsets, line_start[stop])) if len(e_values) else 0
-            if _register_at(words, e_before_count, state_before.e) != before.e:
+            if _register_at(e_list, e_before_count, state_before.e) != before.e:
                 return None
-            if _register_at(words, e_after_count, state_before.e) != after.e:
+            if _register_at(e_list, e_after_count, state_before.e) != after.e:
                 return None
         edit = BlockEdit(start, stop, new_lines, before.e, e_before_count, e_after_count)
-        if relative and edit.g92_at:
+        if relative and edit.g92_count:
             return None
         if not edit.empty and edit.render(0, 0.0, after.e) != "\n".join(new_lines):
             return None  # written in a way `render` does not reproduce
@@ -300,6 +298,7 @@ def replay_layer(
     e_shift = 0.0 if record.relative_e else state_before.e - record.e_start
     if not (np.abs(diff[is_e] - e_shift) <= _E_TOLERANCE).all():
         return None
+    e_list = words.values[is_e].tolist()
     lines = text.split("\n")
     for i in record.time_lines:
         lines[i] = shifted_time_line(lines[i], time_delta)
@@ -310,8 +309,8 @@ def replay_layer(
         elif record.relative_e:
             texts.append((blk.start, blk.stop, [blk.render(0, z_shift, 0.0)]))
         else:
-            e_before = _register_at(words, blk.e_word_before, state_before.e)
-            e_after = _register_at(words, blk.e_word_after, state_before.e)
+            e_before = _register_at(e_list, blk.e_word_before, state_before.e)
+            e_after = _register_at(e_list, blk.e_word_after, state_before.e)
             texts.append((blk.start, blk.stop, [blk.render(round((e_before - blk.e_before) * 100000), z_shift, e_after)]))
     out = splice_blocks(lines, texts)
     end = record.end.copy()
@@ -320,6 +319,6 @@ def replay_layer(
     if record.relative_e:
         end.e = state_before.e + (record.end.e - record.e_start)
     else:
-        end.e = _register_at(words, int(is_e.sum()), state_before.e)
+        end.e = _register_at(e_list, len(e_list), state_before.e)
     layer_z = round(record.layer_z + z_shift, 6)
     return "\n".join(out), end, layer_z

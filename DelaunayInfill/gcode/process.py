@@ -1116,6 +1116,7 @@ def _plan_runs(paths: list[np.ndarray], ends: np.ndarray, cost_of, rounds: int =
     """
     best_runs, best_cost = None, math.inf
     order = paths
+    routed: dict[tuple, list] = {}  # (block, its run's paths): its routes; a block's run often stays the same
     for _ in range(rounds):
         cuts = _route_cuts(order, ends, cost_of)
         # Per block: its run as cut, routed forward from its start, and routed back from its end.
@@ -1125,9 +1126,12 @@ def _plan_runs(paths: list[np.ndarray], ends: np.ndarray, cost_of, rounds: int =
             b = ends[i]
             options.append([run])
             if len(run) >= 2:
-                forward, _ = order_paths(run, (b[0], b[1]) if math.isfinite(b[0]) else None)
-                backward, _ = order_paths(run, (b[2], b[3]) if math.isfinite(b[2]) else None)
-                options[-1] += [forward, [p[::-1] for p in backward[::-1]]]
+                key = (i, *map(id, run))
+                if key not in routed:
+                    forward, _ = order_paths(run, (b[0], b[1]) if math.isfinite(b[0]) else None)
+                    backward, _ = order_paths(run, (b[2], b[3]) if math.isfinite(b[2]) else None)
+                    routed[key] = [forward, [p[::-1] for p in backward[::-1]]]
+                options[-1] += routed[key]
         flat = [(run, ends[i]) for i, opts in enumerate(options) for run in opts]
         costs = _runs_travel([r for r, _ in flat], [b for _, b in flat], cost_of)
         runs, total, at = [], 0.0, 0

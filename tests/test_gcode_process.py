@@ -16,7 +16,7 @@ import re
 import numpy as np
 import pytest
 from shapely import affinity
-from shapely.geometry import Polygon
+from shapely.geometry import MultiPoint, Polygon
 
 from DelaunayInfill.gcode import GCodeError, MeshSettings, ProcessSettings, Region, process_gcode
 from DelaunayInfill.gcode.read import (
@@ -30,6 +30,7 @@ from DelaunayInfill.gcode.read import (
     parse_layer,
 )
 from DelaunayInfill.gcode.verify import verify
+from DelaunayInfill.geometry import contains_xy
 
 DATA = os.path.join(os.path.dirname(__file__), "..", "DelaunayInfill", "data")
 
@@ -431,6 +432,35 @@ def test_plan_runs_stops_when_a_round_gives_back_the_same_route(monkeypatch):
     assert all(a is b for a, b in zip([p for r in runs for p in r], paths, strict=True))  # the serpentine stays as it is
 
 
+def test_plan_runs_routes_each_blocks_run_once_and_plans_as_without_memory(monkeypatch):
+    """A run a block gets again in a later round is not routed again (routing is deterministic: the
+    routes remembered are the ones routing it again would give)."""
+    import DelaunayInfill.gcode.process as process
+
+    rng = np.random.default_rng(5)
+    starts = rng.uniform(0, 40, (30, 2))
+    paths = [np.vstack([a, a + rng.uniform(-3, 3, 2)]) for a in starts]
+    ends = np.array([[0.0, 0.0, 20.0, 0.0], [20.0, 0.0, 40.0, 40.0], [40.0, 40.0, 0.0, 40.0]])
+    cost = lambda a, b: np.hypot(*(np.asarray(b, float) - np.asarray(a, float)).reshape(-1, 2).T)  # noqa: E731
+    seen, repeated = set(), []
+    real = process.order_paths
+
+    def counting(run, start, *args, **kwargs):
+        key = (tuple(map(id, run)), None if start is None else tuple(start))
+        if key in seen:
+            repeated.append(key)
+        seen.add(key)
+        return real(run, start, *args, **kwargs)
+
+    rounds = []
+    real_cuts = process._route_cuts
+    monkeypatch.setattr(process, "_route_cuts", lambda *a: rounds.append(1) or real_cuts(*a))
+    monkeypatch.setattr(process, "order_paths", counting)
+    runs = process._plan_runs(list(paths), ends, cost)
+    assert len(rounds) >= 2 and repeated == []
+    assert sum(len(r) for r in runs) == len(paths)  # every path planned once
+
+
 def test_a_layers_density_lookups_answer_as_infill_density():
     """The per-layer memo of `infill_density` gives its answer with and without an area, families or not."""
     from types import SimpleNamespace
@@ -475,3 +505,59 @@ def test_zones_later_regions_win_and_a_tiled_area_has_no_base_zone():
         assert len(zones) == len(regions) + 1
         assert areas == pytest.approx(expected, abs=1e-6)
         assert [z.area for z in zones] == areas
+    # A modifier split's parts (disjoint, inside the area) are taken as they are: the same zones.
+    parts = [(box(0, 0, 10, 10), 0.3, "a"), (box(10, 0, 14, 10), 0.1, "b")]
+    _, general = _Run._zones(SimpleNamespace(zone_areas={}), area, parts, lw)
+    _, as_parts = _Run._zones(SimpleNamespace(zone_areas={}), area, parts, lw, disjoint=True)
+    assert as_parts == pytest.approx(general, abs=1e-9) and general[-1] > 0  # the base: x 14..20
+
+
+def test_a_modifier_needs_no_fill_hull_a_mesh_without_walls_gets_one(bracket, star, monkeypatch):
+    """An infill-mesh modifier's part is in its host's area (Cura cuts it out of it): no closing of its
+    FILL lines is built.  A mesh of its own without walls has only its FILL lines to go by: its area
+    is their hull, and its infill is still replaced, inside that hull."""
+    from DelaunayInfill.gcode import process as process_module
+
+    hulls = []  # meshes without walls that got their FILL hull
+    real_mesh_layer = process_module.mesh_layer
+
+    def recording_mesh_layer(*args, **kwargs):
+        geo = real_mesh_layer(*args, **kwargs)
+        if geo.used_hull and not geo.has_walls:
+            hulls.append(geo.mesh)
+        return geo
+
+    monkeypatch.setattr(process_module, "mesh_layer", recording_mesh_layer)
+    out, report = process_gcode(bracket, ProcessSettings(seed=2))
+    assert not report.failed_layers and report.layers_processed > 0
+    assert any(r.name == "mesh hbracket_box.stl" for r in report.regions)
+    assert hulls == [], "a modifier's FILL hull was built"
+
+    # The star with its walls printed as support: no walls, so its area is the FILL lines' hull.
+    wall_less = [re.sub(r";TYPE:WALL-(OUTER|INNER)", ";TYPE:SUPPORT", chunk) for chunk in star]
+    out, report = process_gcode(wall_less, ProcessSettings(seed=2))
+    assert set(hulls) == {"star.stl"}, "a mesh without walls got no FILL hull"
+    assert not report.failed_layers and report.layers_processed > 0.5 * report.layers_total
+    original = {p.number: p for p in _parsed(wall_less)}
+    for parse in _parsed(out):
+        old = original[parse.number]
+        new_fill = _fill_points(parse)
+        old_fill = _fill_points(old)
+        if len(new_fill) == 0 or len(old_fill) == 0:
+            continue
+        hull = MultiPoint(old_fill).convex_hull.buffer(0.4)
+        assert contains_xy(hull, new_fill[:, 0], new_fill[:, 1]).mean() >= 0.99, parse.number
+
+
+def _parsed(layers):
+    state, r = MachineState(), RetractionModel()
+    for chunk in iter_chunks(layers):
+        parse = parse_layer(chunk, state, r)
+        if parse.number is not None:
+            yield parse
+
+
+def _fill_points(parse) -> np.ndarray:
+    m = parse.moves
+    fill = (m["kind"] == FILL) & (m["de"] > 0)
+    return np.concatenate([np.column_stack([m["x0"][fill], m["y0"][fill]]), np.column_stack([m["x1"][fill], m["y1"][fill]])])

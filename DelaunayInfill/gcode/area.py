@@ -48,8 +48,10 @@ __all__ = [
     "split_by_line_ends",
     "line_families",
     "between_lines",
+    "span_pieces",
 ]
 
+_GAP_COARSE = 4  # the gap's owners are asked first on cells this many grid steps wide
 _EPS = 0.02  # mm: closes numerical slivers between adjacent buffered lines
 
 
@@ -513,6 +515,116 @@ def line_families(fill: np.ndarray, min_share: float = 0.12, max_families: int =
     return out
 
 
+def span_pieces(fills: list[np.ndarray], max_gap_factor: float = 1.6) -> list[list | None]:
+    """The pieces of `between_lines` of several meshes at once, not yet united.
+
+    All families of all meshes are handled in one pass of array operations
+    (a mesh's lines are a few dozen segments: per-call overhead would
+    dominate).  Per mesh a list of polygons whose union is its
+    `between_lines` (the runs and quadrilaterals may overlap), an empty list
+    when its families span nothing, or None when its lines form no clear
+    families (or it has none).
+
+    Parameters
+    ----------
+    fills : list of ndarray, each shape (k, 2, 2)
+        FILL segments per mesh, mm.
+    max_gap_factor : float
+        Neighbouring lines at most this many times their family's spacing apart span an area.
+
+    Returns
+    -------
+    list of (list of Polygon or None)
+        One entry per mesh, mm.
+    """
+    out: list[list | None] = [None] * len(fills)
+    chosen, theta = [], []
+    for m, fill in enumerate(fills):
+        families = line_families(fill) if len(fill) else []
+        if families:
+            out[m] = []
+        for angle, member in families:
+            chosen.append((m, np.flatnonzero(member)))
+            theta.append(angle)
+    if not chosen:
+        return out
+    mesh_of_family = np.array([m for m, _ in chosen])
+    seg = np.concatenate([fills[m][idx] for m, idx in chosen])
+    family = np.repeat(np.arange(len(chosen)), [len(idx) for _, idx in chosen])
+    u_all = np.column_stack([np.cos(theta), np.sin(theta)])
+    u, n = u_all[family], np.column_stack([-u_all[family, 1], u_all[family, 0]])
+    offset = 0.5 * ((seg[:, 0, 0] + seg[:, 1, 0]) * n[:, 0] + (seg[:, 0, 1] + seg[:, 1, 1]) * n[:, 1])
+    along_a = seg[:, 0, 0] * u[:, 0] + seg[:, 0, 1] * u[:, 1]
+    along_b = seg[:, 1, 0] * u[:, 0] + seg[:, 1, 1] * u[:, 1]
+    lo, hi = np.minimum(along_a, along_b), np.maximum(along_a, along_b)
+    order = np.lexsort((lo, offset, family))
+    offset, lo, hi, family = offset[order], lo[order], hi[order], family[order]
+    # Pieces on one line share its family and offset (within 0.05 mm).
+    new_line = np.ones(len(offset), dtype=bool)
+    new_line[1:] = (family[1:] != family[:-1]) | (offset[1:] - offset[:-1] > 0.05)
+    starts = np.flatnonzero(new_line)
+    counts = np.diff(np.append(starts, len(offset)))
+    line_off, line_family = offset[starts], family[starts]
+    gaps = line_off[1:] - line_off[:-1]
+    within = line_family[1:] == line_family[:-1]  # gap i lies between lines i and i + 1 of one family
+    # Each family's spacing: the median of its gaps (as `median_of`: the mean of the two middle ones).
+    gap_family = line_family[:-1][within]
+    ordered = np.lexsort((gaps[within], gap_family))
+    sorted_gaps = gaps[within][ordered]
+    per_family = np.bincount(gap_family, minlength=len(chosen))
+    first = np.cumsum(per_family) - per_family
+    has = per_family > 0
+    spacing = np.full(len(chosen), np.inf)
+    spacing[has] = 0.5 * (sorted_gaps[(first + (per_family - 1) // 2)[has]] + sorted_gaps[(first + per_family // 2)[has]])
+    # Every pair of pieces on neighbouring lines (close enough), line by line, row-major within a pair of lines.
+    pairs = np.flatnonzero(within & (gaps <= max_gap_factor * spacing[line_family[:-1]]))
+    per_pair = counts[pairs] * counts[pairs + 1]
+    line = np.repeat(pairs, per_pair)
+    rank = np.arange(per_pair.sum()) - np.repeat(np.cumsum(per_pair) - per_pair, per_pair)
+    ia = starts[line] + rank // counts[line + 1]
+    ib = starts[line + 1] + rank % counts[line + 1]
+    # Pieces of the two lines whose along-ranges overlap face each other.
+    facing = (lo[ia] < hi[ib]) & (lo[ib] < hi[ia])
+    ia, ib, line = ia[facing], ib[facing], line[facing]
+    if ia.size == 0:
+        return out
+    u_line, n_line = u_all[line_family], np.column_stack([-u_all[line_family, 1], u_all[line_family, 0]])
+    # Where neighbouring lines are one piece each, consecutive quadrilaterals share a whole side: a
+    # run of them is one polygon, up one end of the lines and down the other.  A run never leaves
+    # its family (pairs are within one).
+    single = (counts[line] == 1) & (counts[line + 1] == 1) & (hi[ia] - lo[ia] > 1e-9) & (hi[ib] - lo[ib] > 1e-9)
+    chained = line[single]
+    if chained.size:
+        run_start = np.flatnonzero(np.r_[True, chained[1:] != chained[:-1] + 1])
+        run_stop = np.r_[run_start[1:], chained.size]
+        for a, b in zip(chained[run_start].tolist(), (chained[run_stop - 1] + 2).tolist(), strict=True):
+            at = starts[a:b]
+            uu, nn, off = u_line[a], n_line[a], line_off[a:b, None]
+            up = lo[at, None] * uu + off * nn
+            down = hi[at, None] * uu + off * nn
+            out[mesh_of_family[line_family[a]]].append(Polygon(np.concatenate([up[:1], down, up[:0:-1]])))
+    ia, ib, line = ia[~single], ib[~single], line[~single]
+    if ia.size:
+        uu, nn = u_line[line][:, None, :], n_line[line][:, None, :]
+        oa, ob = line_off[line][:, None, None], line_off[line + 1][:, None, None]
+        ends = np.stack([lo[ia], hi[ia], hi[ib], lo[ib]], axis=1)[:, :, None]  # (q, 4, 1)
+        side = np.stack([oa[:, 0], oa[:, 0], ob[:, 0], ob[:, 0]], axis=1)  # (q, 4, 1)
+        corners = ends * uu + side * nn
+        for mesh, quad in zip(mesh_of_family[line_family[line]].tolist(), polygons_from(corners), strict=True):
+            out[mesh].append(quad)
+    return out
+
+
+def _united(pieces: list):
+    """The union of polygons as a MultiPolygon (None for None)."""
+    if pieces is None:
+        return None
+    if not pieces:
+        return None
+    # two pieces (one run per family, the usual case): a plain union is cheaper than a cascaded one
+    return to_multipolygon(pieces[0].union(pieces[1]) if len(pieces) == 2 else unary_union(pieces))
+
+
 def between_lines(fill: np.ndarray, max_gap_factor: float = 1.6):
     """The area swept between neighbouring parallel lines, bounded by chords through their ends.
 
@@ -522,7 +634,7 @@ def between_lines(fill: np.ndarray, max_gap_factor: float = 1.6):
     split of `split_by_lines` is biased by the spacings).  For each family,
     every pair of overlapping pieces on neighbouring lines (at most
     `max_gap_factor` x the family's spacing apart) spans a quadrilateral;
-    the union of all of them is returned.
+    the union of all of them is returned (`span_pieces`, united).
 
     Parameters
     ----------
@@ -532,67 +644,9 @@ def between_lines(fill: np.ndarray, max_gap_factor: float = 1.6):
     Returns
     -------
     MultiPolygon or None
-        None when the lines form no clear families.
+        None when the lines form no clear families (or span nothing).
     """
-    families = line_families(fill)
-    if not families:
-        return None
-    quads = []
-    for theta, member in families:
-        u = np.array([np.cos(theta), np.sin(theta)])
-        n = np.array([-u[1], u[0]])
-        seg = fill[member]
-        offset = 0.5 * (seg[:, 0] + seg[:, 1]) @ n
-        along = seg @ u  # (m, 2)
-        lo, hi = along.min(axis=1), along.max(axis=1)
-        order = np.lexsort((lo, offset))
-        offset, lo, hi = offset[order], lo[order], hi[order]
-        # Pieces on one line share its offset (within 0.05 mm).
-        new_line = np.ones(len(offset), dtype=bool)
-        new_line[1:] = np.diff(offset) > 0.05
-        line_off = offset[new_line]
-        if len(line_off) < 2:
-            continue
-        gaps = np.diff(line_off)
-        spacing = median_of(gaps)
-        starts = np.flatnonzero(new_line)
-        counts = np.diff(starts, append=len(offset))
-        # Every pair of pieces on neighbouring lines (close enough), line by line, row-major within a pair of lines.
-        pairs = np.flatnonzero(gaps <= max_gap_factor * spacing)
-        per_pair = counts[pairs] * counts[pairs + 1]
-        line = np.repeat(pairs, per_pair)
-        rank = np.arange(per_pair.sum()) - np.repeat(np.cumsum(per_pair) - per_pair, per_pair)
-        ia = starts[line] + rank // counts[line + 1]
-        ib = starts[line + 1] + rank % counts[line + 1]
-        # Pieces of the two lines whose along-ranges overlap face each other.
-        facing = (lo[ia] < hi[ib]) & (lo[ib] < hi[ia])
-        ia, ib, line = ia[facing], ib[facing], line[facing]
-        if ia.size == 0:
-            continue
-        # Where neighbouring lines are one piece each, consecutive quadrilaterals share a whole
-        # side: a run of them is one polygon, up one end of the lines and down the other.
-        single = (counts[line] == 1) & (counts[line + 1] == 1) & (hi[ia] - lo[ia] > 1e-9) & (hi[ib] - lo[ib] > 1e-9)
-        chained = line[single]
-        bounds = np.flatnonzero(np.diff(chained, prepend=-2, append=-2) != 1)  # where runs of lines start
-        for first, stop in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
-            lines = np.arange(chained[first], chained[stop - 1] + 2)  # the run's lines, in order
-            at = starts[lines]
-            up = lo[at][:, None] * u + line_off[lines][:, None] * n
-            down = hi[at][:, None] * u + line_off[lines][:, None] * n
-            quads.append(Polygon(np.concatenate([up[:1], down, up[:0:-1]])))
-        ia, ib, line = ia[~single], ib[~single], line[~single]
-        if ia.size == 0:
-            continue
-        oa, ob = line_off[line][:, None], line_off[line + 1][:, None]
-        corners = np.stack([
-            lo[ia][:, None] * u + oa * n, hi[ia][:, None] * u + oa * n,
-            hi[ib][:, None] * u + ob * n, lo[ib][:, None] * u + ob * n,
-        ], axis=1)
-        quads.extend(polygons_from(corners))
-    if not quads:
-        return None
-    # two pieces (one run per family, the usual case): a plain union is cheaper than a cascaded one
-    return to_multipolygon(quads[0].union(quads[1]) if len(quads) == 2 else unary_union(quads))
+    return _united(span_pieces([fill], max_gap_factor)[0])
 
 
 def _distance_to(area, pts: np.ndarray, step: float = 0.1) -> np.ndarray:
@@ -604,51 +658,265 @@ def _distance_to(area, pts: np.ndarray, step: float = 0.1) -> np.ndarray:
     return np.where(contains_xy(area, pts[:, 0], pts[:, 1]), 0.0, dist)
 
 
-def _border_ends(fills: list[np.ndarray], grid: _OwnerGrid, owns: list, area, end_inset: float,
-                 probe: float, reach: list[float]) -> list[np.ndarray]:
+def _squared_distances(pts: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Squared distance (mm^2) from each point (p, 2) to each segment (k, 2, 2), shape (p, k)."""
+    start = segments[:, 0]
+    d = segments[:, 1] - start
+    length2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+    rel_x, rel_y = pts[:, 0, None] - start[:, 0], pts[:, 1, None] - start[:, 1]  # (p, k)
+    t = np.clip((rel_x * d[:, 0] + rel_y * d[:, 1]) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+    ex, ey = rel_x - t * d[:, 0], rel_y - t * d[:, 1]
+    return ex * ex + ey * ey
+
+
+def _segment_distances(pts: np.ndarray, segments: np.ndarray, sample_step: float) -> np.ndarray:
+    """Distance (mm) from each point (p, 2) to the nearest of `segments` (k, 2, 2), shape (p,).
+
+    Exact, point by segment, for up to a few million pairs; beyond that to
+    the nearest of the segments' samples `sample_step` mm apart (a tree).
+    """
+    if len(pts) * len(segments) > 2_000_000:
+        return cKDTree(sample_segments(segments, sample_step)).query(pts)[0]
+    return np.sqrt(_squared_distances(pts, segments).min(axis=1))
+
+
+def _nearest_mesh(pts: np.ndarray, fills: list[np.ndarray], spacings: list[float], sample_step: float,
+                  bound: float = 2.0) -> np.ndarray:
+    """Index of the mesh whose lines are nearest each point (p, 2), in units of its line spacing; -1: no lines.
+
+    Few points and lines are measured all at once.  Otherwise a first pass
+    measures each mesh's distances only at the points within `bound`
+    spacings of its lines' bounding box, and where no mesh is that near,
+    all distances are measured: nearer than the bound beats anything beyond
+    it, so the owners are those of a full search.  Ties go to the first mesh.
+    """
+    owner = np.full(len(pts), -1, dtype=np.int64)
+    meshes = [k for k, fill in enumerate(fills) if len(fill)]
+    if len(pts) == 0 or not meshes:
+        return owner
+    sizes = [len(fills[k]) for k in meshes]
+    if len(pts) * sum(sizes) <= 8_000:
+        scaled = _squared_distances(pts, np.concatenate([fills[k] for k in meshes]))
+        scaled *= np.repeat([1.0 / spacings[k] ** 2 for k in meshes], sizes)
+        per_mesh = np.minimum.reduceat(scaled, np.cumsum(sizes) - sizes, axis=1)
+        return np.asarray(meshes)[np.argmin(per_mesh, axis=1)]
+    best = np.full(len(pts), np.inf)
+
+    def closer(k: int, at: np.ndarray) -> None:
+        dist = _segment_distances(pts[at], fills[k], sample_step) / spacings[k]
+        near = dist < best[at]
+        best[at[near]], owner[at[near]] = dist[near], k
+
+    for k in meshes:
+        reach = bound * spacings[k]
+        lo, hi = fills[k].min(axis=(0, 1)) - reach, fills[k].max(axis=(0, 1)) + reach
+        closer(k, np.flatnonzero((pts[:, 0] >= lo[0]) & (pts[:, 0] <= hi[0]) & (pts[:, 1] >= lo[1]) & (pts[:, 1] <= hi[1])))
+    far = np.flatnonzero(~(best < 0.99 * bound))  # 0.99: clear of rounding at the bound
+    if far.size:
+        best[far], owner[far] = np.inf, -1
+        for k in meshes:
+            closer(k, far)
+    return owner
+
+
+def _border_ends(fills: list[np.ndarray], spacings: list[float], owns: list, area, end_inset: float,
+                 probe: float, sample_step: float) -> list[np.ndarray]:
     """Per mesh k >= 1: the line ends of the other meshes that lie on its border, mm (p, 2).
 
     Each line is continued `probe` mm beyond its end; ends whose continuation
     leaves `area` lie on its outer border and are never counted.  The host's
     lines (j = 0) end only on its outer border or on a modifier's border:
     such an end goes to the modifier whose lines' span (`owns`) is nearest,
-    within `reach[k]` mm.  A modifier's line end goes to modifier k when its
-    continuation runs into k's nearest-line part (`grid`); it ends
-    `end_inset` before the border and is moved there.
+    within its line spacing.  A modifier's line end goes to modifier k when
+    k's lines are the nearest to its continuation (in line spacings,
+    `_nearest_mesh`); it ends `end_inset` before the border and is moved there.
     """
     out = [np.zeros((0, 2)) for _ in fills]
-    for j, fill in enumerate(fills):
-        if len(fill) == 0:
-            continue
-        d = fill[:, 1] - fill[:, 0]
-        length = np.hypot(d[:, 0], d[:, 1])
-        ok = length > 1e-6
-        u = d[ok] / length[ok, None]
-        ends = np.concatenate([fill[ok, 1], fill[ok, 0]])
-        outward = np.concatenate([u, -u])
-        beyond = ends + probe * outward
-        inside = contains_xy(area, beyond[:, 0], beyond[:, 1])
-        if not inside.any():
-            continue
-        ends, outward, beyond = ends[inside], outward[inside], beyond[inside]
-        if j == 0:
-            dist = np.full((len(fills), len(ends)), np.inf)
-            for k in range(1, len(fills)):
-                if owns[k] is not None and not owns[k].is_empty:
-                    dist[k] = _distance_to(owns[k], beyond)
-                    dist[k][dist[k] > reach[k]] = np.inf
-            best = np.argmin(dist, axis=0)
-            found = np.isfinite(dist[best, np.arange(len(ends))])
-            for k in range(1, len(fills)):
-                sel = found & (best == k)
-                out[k] = np.concatenate([out[k], ends[sel]])
-            continue
-        border = ends + end_inset * outward
-        owner = grid.at(beyond)
+    segments = np.concatenate(fills)
+    source = np.repeat(np.arange(len(fills)), [len(f) for f in fills])
+    d = segments[:, 1] - segments[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    ok = length > 1e-6
+    u = d[ok] / length[ok, None]
+    ends = np.concatenate([segments[ok, 1], segments[ok, 0]])
+    outward = np.concatenate([u, -u])
+    source = np.concatenate([source[ok], source[ok]])
+    beyond = ends + probe * outward
+    inside = contains_xy(area, beyond[:, 0], beyond[:, 1])
+    ends, outward, beyond, source = ends[inside], outward[inside], beyond[inside], source[inside]
+    hosts = source == 0
+    if hosts.any():
+        dist = np.full((len(fills), int(hosts.sum())), np.inf)
         for k in range(1, len(fills)):
-            hit = (owner == k) if k != j else np.zeros(len(owner), dtype=bool)
+            if owns[k] is not None and not owns[k].is_empty:
+                dist[k] = _distance_to(owns[k], beyond[hosts])
+                dist[k][dist[k] > spacings[k]] = np.inf
+        best = np.argmin(dist, axis=0)
+        found = np.isfinite(dist[best, np.arange(len(best))])
+        for k in range(1, len(fills)):
+            out[k] = ends[hosts][found & (best == k)]
+    if (~hosts).any():
+        border = ends[~hosts] + end_inset * outward[~hosts]
+        owner = _nearest_mesh(beyond[~hosts], fills, spacings, sample_step)
+        for k in range(1, len(fills)):
+            hit = (owner == k) & (source[~hosts] != k)
             if hit.any():
                 out[k] = np.concatenate([out[k], border[hit]])
+    return out
+
+
+def _grid_step(area, step: float) -> float:
+    """The nearest-line grid's step, mm: `step`, coarser for large areas (at most ~60k cells)."""
+    minx, miny, maxx, maxy = area.bounds
+    return max(step, float(np.sqrt((maxx - minx) * (maxy - miny) / 60000.0)))
+
+
+class _GapOwner:
+    """Which mesh a point of the gap between the held parts goes to.
+
+    The host or a modifier as the nearest lines say (in line spacings,
+    `_nearest_mesh`): the host's sparse lines reach into the corners its
+    span cuts.  Among the modifiers, the one whose held part is nearest in
+    its line spacings, within one spacing: a sparse modifier's hull misses
+    more of its corners than a dense one's.  A modifier whose lines form no
+    families (nothing held) is measured to its lines.  Without host lines,
+    a point no held part is that near goes to the nearest in spacings.
+
+    Parameters
+    ----------
+    fills : list of ndarray, each shape (k, 2, 2)
+        FILL segments per mesh, index 0 the host, mm.
+    spacings : list of float
+        Line spacing per mesh, mm.
+    held : list of MultiPolygon
+        What each modifier holds (index 0 unused), mm.
+    sample_step : float
+        Borders and lines are measured to samples this far apart, mm.
+    """
+
+    def __init__(self, fills: list[np.ndarray], spacings: list[float], held: list, sample_step: float):
+        self.fills, self.spacings, self.sample_step = fills, spacings, sample_step
+        self.modifiers, self.trees = [], []
+        for k in range(1, len(fills)):
+            if not held[k].is_empty:
+                samples = sample_segments(boundary_segments(held[k]), sample_step)
+            elif len(fills[k]):
+                samples = sample_segments(fills[k], sample_step)
+            else:
+                continue
+            self.modifiers.append(k)
+            self.trees.append(cKDTree(samples))
+
+    def __call__(self, pts: np.ndarray) -> np.ndarray:
+        """Owner (mesh index) of each point (p, 2), shape (p,)."""
+        host_has_lines = len(self.fills[0]) > 0
+        owner = _nearest_mesh(pts, self.fills, self.spacings, self.sample_step) if host_has_lines else None
+        ask = np.flatnonzero(owner >= 1) if host_has_lines else np.arange(len(pts))
+        found = np.zeros(ask.size, dtype=bool)
+        if ask.size and self.trees:
+            at = pts[ask]
+            dist = np.full((len(self.trees), ask.size), np.inf)
+            for row, (tree, k) in enumerate(zip(self.trees, self.modifiers, strict=True)):
+                # only the points within reach of the samples' box can be within reach of them
+                reach = self.spacings[k]
+                lo, hi = tree.mins - reach, tree.maxes + reach
+                near = np.flatnonzero((at[:, 0] >= lo[0]) & (at[:, 0] <= hi[0]) & (at[:, 1] >= lo[1]) & (at[:, 1] <= hi[1]))
+                if near.size:
+                    dist[row, near] = tree.query(at[near], distance_upper_bound=reach)[0] / reach
+            best = np.argmin(dist, axis=0)
+            found = np.isfinite(dist[best, np.arange(ask.size)])
+        if owner is None:  # no host lines: a point no held part is near goes to the nearest one
+            owner = np.empty(len(pts), dtype=np.int64)
+            rest = ask[~found]
+            if rest.size and self.trees:
+                far = np.stack([tree.query(pts[rest])[0] / self.spacings[k] for tree, k in zip(self.trees, self.modifiers, strict=True)])
+                owner[rest] = np.asarray(self.modifiers)[np.argmin(far, axis=0)]
+            elif rest.size:
+                owner[rest] = _nearest_mesh(pts[rest], self.fills, self.spacings, self.sample_step)
+        if found.any():
+            owner[ask[found]] = np.asarray(self.modifiers)[best[found]]
+        return owner
+
+
+def _gap_owners(gap, owner_of, x0: float, y0: float, step: float, coarse: int = 4) -> _OwnerGrid:
+    """The owners of the cells over `gap`, on the lattice of corner (`x0`, `y0`) and `step` (mm).
+
+    The owners are found first on cells `coarse` times larger: those that
+    meet `gap` (holding a point of its border, sampled every half step, or
+    its centre) get ``owner_of`` their centre; the other large cells take
+    the owner of the nearest one that does (cut to the gap most add
+    nothing, and each owner's cells come out as a few large pieces with
+    short borders).  Where neighbouring large cells differ, the border
+    between owners runs near: there each `step` cell that meets `gap` is
+    asked on its own.  Cut to `gap`, the cells of each mesh are its share.
+
+    Parameters
+    ----------
+    gap : (Multi)Polygon
+        mm.
+    owner_of : callable
+        Points (p, 2) mm -> mesh index of each, shape (p,) (`_GapOwner`).
+    x0, y0, step : float
+        The lattice, mm.
+    coarse : int
+        Large cells are this many steps wide.
+
+    Returns
+    -------
+    _OwnerGrid
+        Cells of `step` mm, an owner (mesh index) in every one; ``centred`` None.
+    """
+    big = coarse * step
+    minx, miny, maxx, maxy = gap.bounds
+    j0, j1 = int(np.floor((minx - x0) / big)) - 1, int(np.ceil((maxx - x0) / big)) + 1
+    i0, i1 = int(np.floor((miny - y0) / big)) - 1, int(np.ceil((maxy - y0) / big)) + 1
+    xs, ys = x0 + (np.arange(j0, j1) + 0.5) * big, y0 + (np.arange(i0, i1) + 0.5) * big
+    edges = boundary_segments(gap)
+    meets = _inside_lattice(gap, xs, ys)
+    border = sample_segments(edges, step / 2)
+    meets[np.floor((border[:, 1] - ys[0]) / big + 0.5).astype(np.int64),
+          np.floor((border[:, 0] - xs[0]) / big + 0.5).astype(np.int64)] = True
+    owner = np.full(meets.shape, -1, dtype=np.int64)
+    rows, cols = np.nonzero(meets)
+    owner[rows, cols] = owner_of(np.column_stack([xs[cols], ys[rows]]))
+    if 0 < len(rows) < owner.size:
+        # (a k-d tree, not scipy.ndimage's distance transform: frozen Cura builds may lack ndimage)
+        _, nearest = cKDTree(np.column_stack([rows, cols])).query(np.argwhere(~meets))
+        owner[~meets] = owner[rows[nearest], cols[nearest]]
+    fine = np.repeat(np.repeat(owner, coarse, axis=0), coarse, axis=1)
+    if coarse == 1:
+        return _OwnerGrid(x0 + j0 * big, y0 + i0 * big, step, fine)
+    # Large cells next to one of another owner: the border between them runs near.
+    padded = np.pad(owner, 1, mode="edge")
+    mixed = np.zeros(owner.shape, dtype=bool)
+    for di in range(3):
+        for dj in range(3):
+            other = padded[di:di + owner.shape[0], dj:dj + owner.shape[1]]
+            mixed |= other != owner
+    mixed &= _grown(meets)
+    if mixed.any():
+        fxs = x0 + (j0 * coarse + np.arange(fine.shape[1]) + 0.5) * step
+        fys = y0 + (i0 * coarse + np.arange(fine.shape[0]) + 0.5) * step
+        candidate = np.repeat(np.repeat(mixed, coarse, axis=0), coarse, axis=1)
+        ask = np.zeros(fine.shape, dtype=bool)
+        rows, cols = np.nonzero(candidate)
+        ask[rows, cols] = contains_xy(gap, fxs[cols], fys[rows])
+        ask[np.floor((border[:, 1] - fys[0]) / step + 0.5).astype(np.int64),
+            np.floor((border[:, 0] - fxs[0]) / step + 0.5).astype(np.int64)] = True
+        ask &= candidate
+        rows, cols = np.nonzero(ask)
+        fine[rows, cols] = owner_of(np.column_stack([fxs[cols], fys[rows]]))
+    return _OwnerGrid(x0 + j0 * big, y0 + i0 * big, step, fine)
+
+
+def _grown(mask: np.ndarray) -> np.ndarray:
+    """`mask` (rows, cols) and the cells round each of its cells (8 neighbours)."""
+    by_rows = mask.copy()
+    by_rows[1:] |= mask[:-1]
+    by_rows[:-1] |= mask[1:]
+    out = by_rows.copy()
+    out[:, 1:] |= by_rows[:, :-1]
+    out[:, :-1] |= by_rows[:, 1:]
     return out
 
 
@@ -659,7 +927,7 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
     Cura clips every mesh's infill lines to its own area, so line ends mark
     the borders between meshes; a nearest-line split (`split_by_lines`)
     puts the border up to half a spacing off, which biases a region's
-    density.  Each modifier gets:
+    density.  Each modifier holds:
 
     * where its lines end: the area between its neighbouring lines
       (`between_lines`) grown by `end_inset` (Cura ends infill lines that far
@@ -668,13 +936,15 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
       (`_border_ends`);
     * the convex hull of those (inside `area`) when the area between its
       lines fills at least `convex_fill` of it: sparse lines cut a convex
-      corner by up to a spacing, the hull does not;
-    * otherwise the area between its lines plus what its nearest-line part
-      adds where no other mesh's lines span.
+      corner by up to a spacing, the hull does not.
 
-    Later modifiers win where they overlap; the host gets the rest.  Meshes
-    whose lines form no families (gyroid, concentric) keep the nearest-line
-    split.
+    Later modifiers win where what they hold overlaps.  The gap no modifier
+    holds and the host's lines do not span goes, cell by cell of a `step` mm
+    grid (cut to the gap exactly, `_gap_owners`), to the host or a modifier
+    as the nearest lines say, and among modifiers to the one whose held part
+    is nearest in line spacings (`_GapOwner`): this is all a modifier whose
+    lines form no families (gyroid, concentric) gets.  The host gets the rest, less strips
+    narrower than its line spacing, which go to the nearest modifier.
 
     Parameters
     ----------
@@ -683,73 +953,71 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
     fills : list of ndarray, each shape (k, 2, 2)
         Cura's FILL segments per mesh, index 0 the host, mm.
     spacings : list of float
-        Line spacing per mesh, mm (for the nearest-line split).
+        Line spacing per mesh, mm.
     end_inset : float
         How far inside its area a line ends, mm.
     step : float
-        Grid step of the nearest-line split, mm.
+        Grid step of the nearest-line split of the gap, mm (coarser for
+        large areas: at most ~60k cells over `area`).
     convex_fill : float
         Share of its hull the lines must span for the hull to be taken.
 
     Returns
     -------
     list of MultiPolygon
-        One per mesh, in the order given (index 0 the host's part).
+        One per mesh, in the order given (index 0 the host's part); they
+        do not overlap and together make `area`.
     """
     if len(fills) < 2:
         return split_by_lines(area, fills, spacings, step=step)
-    grid = _owner_grid(area, fills, spacings, step)
-    if grid is None:
+    if area.is_empty or not any(len(f) for f in fills):
         return [empty_area() for _ in fills]
-    spans = [between_lines(f) if len(f) else None for f in fills]
-    owns = [None] + [None if sp is None else to_multipolygon(sp.buffer(end_inset, 4).intersection(area))
-                     for sp in spans[1:]]
-    ends = _border_ends(fills, grid, owns, area, end_inset, probe=max(4 * end_inset, 2 * step),
-                        reach=list(spacings))
-    inside_span = [None if sp is None else grid.inside(sp) for sp in spans]
-    # Per modifier the grid cells it takes (all its nearest-line part when its lines form no
-    # families, else the rest of it: where no other mesh's lines span) and its own part.
-    labels = np.full(grid.owner.shape, -1, dtype=np.int64)
-    held: list = [None] * len(fills)
+    step = _grid_step(area, step)
+    pieces = span_pieces(fills)
+    # A modifier's span is needed only grown (the buffer of its overlapping pieces is that of their
+    # union); the host's only as it is.
+    owns = [None] + [to_multipolygon(MultiPolygon(p).buffer(end_inset, 4)) if p else None for p in pieces[1:]]
+    host_span = _united(pieces[0])
+    ends = _border_ends(fills, spacings, owns, area, end_inset, probe=max(4 * end_inset, 2 * step),
+                        sample_step=step / 2)
+    held: list = [empty_area()] * len(fills)
     for k in range(1, len(fills)):
         own = owns[k]
-        mine = grid.owner == k
-        if own is not None and not own.is_empty:
-            for j, covered in enumerate(inside_span):
-                if j != k and covered is not None:
-                    mine = mine & ~covered
-            corners = np.concatenate([np.concatenate([np.asarray(p.exterior.coords) for p in polygons_of(own)]), ends[k]])
-            hull = convex_hull_of(corners).intersection(area)
-            held[k] = hull if own.area >= convex_fill * hull.area else own
-        labels[mine] = k
-    taken = labels >= 0
-    rests, free = grid.regions(labels, len(fills)) if taken.any() else ([empty_area()] * len(fills), None)
-    children = []
-    for k in range(1, len(fills)):
-        if held[k] is None:
-            children.append(to_multipolygon(rests[k].intersection(area)) if not rests[k].is_empty else empty_area())
-        else:
-            children.append(to_multipolygon(held[k].union(rests[k]).intersection(area)))
+        if own is None or own.is_empty:
+            continue
+        corners = np.concatenate([np.concatenate([np.asarray(p.exterior.coords) for p in polygons_of(own)]), ends[k]])
+        hull = to_multipolygon(convex_hull_of(corners).intersection(area))
+        held[k] = hull if own.area >= convex_fill * hull.area else to_multipolygon(own.intersection(area))
     # Later modifiers win where they overlap: each loses what later ones whose boxes meet its box hold.
-    claimed = list(children)
-    for k, part in enumerate(children):
-        for later in children[k + 1:]:
+    claimed = list(held)
+    for k in range(1, len(fills)):
+        part = held[k]
+        for later in held[k + 1:]:
             if not part.is_empty and not later.is_empty and _boxes_meet(part.bounds, later.bounds):
                 part = part.difference(later)
         claimed[k] = to_multipolygon(part)
-    # The host keeps what no modifier holds.  Every modifier is (its own part + its cells) inside
-    # `area`, so that is `area` less the own parts, in the free cells: no union of the modifiers'
-    # staircase borders.
-    own_parts = [h for h in held if h is not None]
-    host = to_multipolygon(area.difference(unary_union(own_parts))) if own_parts else to_multipolygon(area)
-    if free is not None:
-        host = to_multipolygon(host.intersection(free))
-    children = claimed
+    holding = [h for h in held[1:] if not h.is_empty]
+    free = to_multipolygon(area.difference(unary_union(holding))) if holding else to_multipolygon(area)
+    gap = free if host_span is None else to_multipolygon(free.difference(host_span))
+    rests = [empty_area()] * len(fills)
+    if not gap.is_empty:
+        grid = _gap_owners(gap, _GapOwner(fills, spacings, held, step / 2), *area.bounds[:2], step, _GAP_COARSE)
+        cells, _ = grid.regions(grid.owner, len(fills))
+        rests = [to_multipolygon(c.intersection(gap)) if not c.is_empty else empty_area() for c in cells]
+    if host_span is None:
+        host = rests[0]
+    else:
+        held_span = free.intersection(host_span)
+        host = to_multipolygon(held_span.union(rests[0]) if not rests[0].is_empty else held_span)
+    children = [to_multipolygon(c.union(r)) if not r.is_empty else c for c, r in zip(claimed[1:], rests[1:], strict=True)]
     # Strips of the host narrower than its line spacing left between modifiers are
     # estimation slivers, not a zone the host's density could fill: the nearest modifier takes each.
     width = 0.5 * spacings[0]
     core = to_multipolygon(host.buffer(-width, 4).buffer(width, 4).intersection(host))
-    slivers = [p for p in polygons_of(host.difference(core) if not core.is_empty else host) if p.area > 1e-9]
+    try:
+        slivers = [p for p in polygons_of(host.difference(core) if not core.is_empty else host) if p.area > 1e-9]
+    except Exception:  # noqa: BLE001 - GEOS can fail on nearly touching borders; the slivers then stay the host's
+        slivers = []
     if slivers and any(not c.is_empty for c in children):
         owner = _nearest_within(slivers, children, 1e-6 + 0.1 * width)
         for k, child in enumerate(children):

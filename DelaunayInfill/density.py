@@ -10,6 +10,11 @@ it per zone until the printed density matches the target.
 
 The paper's calibration is its Formula (6), rho = 2 / r at a 1.2 mm line
 width; scaled for the line width that is ``r = 2 * (w / 1.2) / rho``.
+
+`DensityMap.raster` labels the zones on a grid of square cells (a scanline
+fill, run by run): with several sharp-border zones the pattern build
+measures its zones on it (`pattern._RasterMeter`) instead of cutting lines
+with the zones' polygons.
 """
 
 from __future__ import annotations
@@ -22,9 +27,10 @@ from scipy.spatial import cKDTree
 
 from .geometry import as_area, boundary_segments, contains_xy, to_multipolygon, unary_union
 
-__all__ = ["DensityMap", "KAPPA", "paper_radius", "check_density", "check_line_width"]
+__all__ = ["DensityMap", "KAPPA", "ZoneRaster", "coverage_runs", "paper_radius", "check_density", "check_line_width"]
 
 KAPPA = 2.70  # printed density * r / w for maximal Poisson-disk Delaunay edges (measured)
+_BITS = 52  # polygons per coverage raster: one bit each in a float64 cell sum (exact up to 2^53)
 
 
 def check_density(value, what: str = "density") -> float:
@@ -201,3 +207,155 @@ class DensityMap:
             w = self._weights(k, xy)
             rho = rho * (1.0 - w) + dens * w
         return rho
+
+    def raster(self, area, cell: float) -> ZoneRaster | None:
+        """Sharp-border zones of `area` on a grid of square cells (see `zones`).
+
+        Parameters
+        ----------
+        area : shapely (Multi)Polygon
+            The area the zones tile, mm.
+        cell : float
+            Cell side, mm; a cell takes the zone at its centre.
+
+        Returns
+        -------
+        ZoneRaster or None
+            Label 0 the base zone, k region k (later regions win), -1 outside
+            `area`; None with more than `_BITS` - 1 regions.
+        """
+        if len(self.regions) >= _BITS:
+            return None
+        grid = ZoneRaster.grid_over(area.bounds, cell)
+        # Region k adds 2^(k - 1), `area` the highest bit: inside `area` the sum's highest
+        # other bit is the last region covering the cell (frexp(2^(k - 1)) = (0.5, k); 0: none).
+        polygons = [poly for poly, _ in self.regions]
+        start, covered = coverage_runs([*polygons, area], grid)
+        whole = 2.0 ** len(polygons)
+        label = np.where(covered >= whole, np.frexp(covered - whole)[1], -1)
+        return _runs_to_raster(grid, start, label, len(polygons) + 1)
+
+
+def _runs_to_raster(grid: ZoneRaster, start: np.ndarray, label: np.ndarray, zones: int) -> ZoneRaster:
+    """The grid's cells labelled run by run: `coverage_runs`' run starts (q,), a label per run (q,).
+
+    The cell past each row's end (covered by no polygon) must be labelled -1:
+    the zones' cell counts are then taken from the runs.
+    """
+    ny, nx = grid.labels.shape
+    label = label.astype(np.int8)
+    run = np.diff(np.append(start, ny * (nx + 1)))
+    cells = np.repeat(label, run).reshape(ny, nx + 1)[:, :nx]
+    counts = np.bincount(label.astype(np.intp) + 1, run, zones + 1)[1:].astype(np.intp)
+    return ZoneRaster(cells, grid.x0, grid.y0, grid.cell, [counts])
+
+
+@dataclass
+class ZoneRaster:
+    """Zone labels on a grid of square cells.
+
+    Attributes
+    ----------
+    labels : ndarray of int, shape (ny, nx)
+        Zone index per cell (row j, column i: centre ``(x0 + (i + 0.5) cell, y0 + (j + 0.5) cell)``),
+        -1 where no zone.
+    x0, y0 : float
+        Lower left corner of the grid, mm.
+    cell : float
+        Cell side, mm.
+    """
+
+    labels: np.ndarray
+    x0: float
+    y0: float
+    cell: float
+    _counts: list = field(default_factory=list, compare=False, repr=False)  # [cells per label 0, 1, ...]
+    _padded: list = field(default_factory=list, compare=False, repr=False)
+
+    @classmethod
+    def grid_over(cls, bounds, cell: float) -> ZoneRaster:
+        """An empty grid (labels -1) of cells of side `cell` (mm) covering `bounds` (x0, y0, x1, y1)."""
+        x0, y0, x1, y1 = bounds
+        shape = (max(1, math.ceil((y1 - y0) / cell)), max(1, math.ceil((x1 - x0) / cell)))
+        return cls(np.full(shape, -1, dtype=np.int8), float(x0), float(y0), float(cell))
+
+    def at(self, xy: np.ndarray) -> np.ndarray:
+        """Label (m,) of the cells holding the points (m, 2) (mm); -1 off the grid."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        ny, nx = self.labels.shape
+        if not self._padded:  # a frame of -1 round the grid: points off it are clipped onto the frame
+            padded = np.full((ny + 2, nx + 2), -1, dtype=self.labels.dtype)
+            padded[1:-1, 1:-1] = self.labels
+            self._padded.append(padded.ravel())
+        # NaN coordinates: clip keeps NaN, taken as off the grid (index 0, on the frame) below.
+        i = np.clip(np.floor((xy[:, 0] - self.x0) / self.cell) + 1, 0, nx + 1)
+        j = np.clip(np.floor((xy[:, 1] - self.y0) / self.cell) + 1, 0, ny + 1)
+        flat = np.nan_to_num(j * (nx + 2) + i, nan=0.0).astype(np.intp)
+        return self._padded[0][flat].astype(np.intp)
+
+    def counts(self, zones: int) -> np.ndarray:
+        """Cells per zone label 0 .. zones - 1, shape (zones,)."""
+        if not self._counts:
+            self._counts.append(np.bincount(self.labels.ravel().astype(np.intp) + 1)[1:])
+        counts = self._counts[0][:zones]
+        return np.pad(counts, (0, zones - counts.size)) if counts.size < zones else counts
+
+
+def coverage_runs(polygons, grid: ZoneRaster) -> tuple[np.ndarray, np.ndarray]:
+    """Which polygons cover the cell centres of `grid`, run by run: the sum of 2^k over the polygons k.
+
+    Scanline fill: every ring edge is crossed with the rows of cell centres it
+    spans; along a row, a polygon's crossings (sorted) pair up into the spans
+    inside it.  Each polygon adds its own bit over its spans; the sum changes
+    only where a span starts or ends, so it is kept per run of cells (exact
+    in float64 for up to `_BITS` polygons).
+
+    Parameters
+    ----------
+    polygons : sequence of shapely (Multi)Polygon
+        mm, holes allowed; at most `_BITS`.
+    grid : ZoneRaster
+        The cells (its labels are not read), ny rows of nx.
+
+    Returns
+    -------
+    start : ndarray of int, shape (q,)
+        First cell of each run, ascending from 0, as flat indices into the
+        rows of nx + 1 cells (each row has one more cell, past its end, that no
+        polygon covers: every run that covers ends in its own row).
+    covered : ndarray of float, shape (q,)
+        The sum over each run.
+    """
+    if len(polygons) > _BITS:
+        raise ValueError(f"at most {_BITS} polygons per coverage, got {len(polygons)}")
+    ny, nx = grid.labels.shape
+    edges = [boundary_segments(poly) for poly in polygons]
+    owner = np.repeat(np.arange(len(polygons)), [len(e) for e in edges])
+    if owner.size == 0:
+        return np.zeros(1, np.intp), np.zeros(1)
+    edges = np.concatenate(edges)
+    # In cell units, cell centres at integers.
+    xa, xb = ((edges[:, :, 0] - grid.x0) / grid.cell - 0.5).T
+    ya, yb = ((edges[:, :, 1] - grid.y0) / grid.cell - 0.5).T
+    # Rows whose centre lies in [min y, max y) of the edge (a vertex on a row counts once).
+    lo = np.clip(np.ceil(np.minimum(ya, yb)), 0, ny).astype(np.intp)
+    hi = np.clip(np.ceil(np.maximum(ya, yb)), 0, ny).astype(np.intp)
+    spans = hi - lo
+    edge = np.repeat(np.arange(len(edges)), spans)
+    row = np.arange(edge.size) - np.repeat(np.cumsum(spans) - spans, spans) + lo[edge]
+    t = (row - ya[edge]) / (yb[edge] - ya[edge])  # spans > 0: yb != ya
+    column = np.clip(np.ceil(xa[edge] + t * (xb[edge] - xa[edge])), 0, nx).astype(np.intp)
+    order = np.lexsort((column, row, owner[edge]))
+    key = row[order] * (nx + 1) + column[order]
+    bit = np.ldexp(1.0, owner[edge][order][0::2])
+    # The sum's steps, in cell order; steps at one cell merge (their sum is exact).
+    key = np.concatenate((key[0::2], key[1::2]))
+    step = np.concatenate((bit, -bit))
+    order = np.argsort(key, kind="stable")
+    key, step = key[order], step[order]
+    last = np.append(key[1:] != key[:-1], True)
+    start = key[last]
+    covered = np.cumsum(step)[last]
+    if start.size == 0 or start[0] != 0:  # the cells before the first step: covered by none
+        start, covered = np.append(0, start), np.append(0.0, covered)
+    return start, covered

@@ -26,10 +26,10 @@ import numpy as np
 from scipy.spatial import QhullError, cKDTree
 
 from .decomposition import decompose_convex
-from .density import KAPPA, DensityMap, check_line_width, paper_radius
+from .density import KAPPA, DensityMap, ZoneRaster, check_line_width, paper_radius
 from .geometry import as_area, boundary_segments, box, contains_xy, polygons_of, to_multipolygon, unary_union
 from .routing import chain_segments, clip_segments, odd_vertex_count, order_paths, split_segments
-from .sampling import sample_poisson_disk
+from .sampling import sample_poisson_disk, sample_triangulated
 from .triangulation import (
     GrowingDelaunay,
     canonical_triangles,
@@ -52,6 +52,11 @@ _SLIVER = 1.5  # hull triangles with a circumradius above 1.5 r are not part of 
 _COARSE = 36.0  # several zones: a zone under this many squared radii is only balanced once off target
 _THIN = 1.4  # zone interiors: a zone of mean width under this many line widths is kept whole
 _FEW = 48  # zone meter: up to this many pieces to cut query the edges' tree (no tree of their own)
+_CELL = 0.45  # several sharp-border zones: raster cell side, in line widths
+_OUTLINE = 2.0  # ... zone interiors leave out this many widths along the footprint's outline
+_KEEP_OUTLINE = 0.7  # ... where a zone keeps this share of its cells (else only the band along others)
+_MAX_CELLS = 120_000  # ... the cell grows beyond that when the footprint's box would need more cells
+_FEW_CELLS = 400  # ... cells wider than a line: a zone of fewer cells is measured exactly instead
 
 
 def segment_length(segments: np.ndarray) -> float:
@@ -83,6 +88,7 @@ class _ZoneMeter:
     def __init__(self, zones: list, piece: float = 0.5):
         self.zones = zones
         self.piece = piece
+        self.areas = np.array([0.0 if zone.is_empty else zone.area for zone in zones])  # (zones,) mm^2
         self.present = [k for k, zone in enumerate(zones) if not zone.is_empty and zone.area > 0]
         self.bounds = {k: zones[k].bounds for k in self.present}
         corners = np.array(list(self.bounds.values()), dtype=float).reshape(-1, 4)
@@ -160,7 +166,7 @@ class _ZoneMeter:
             near = np.flatnonzero(in_box[row])
             yield k, near[contains_xy(self.zones[k], x[near], y[near])]
 
-    def _contains(self, k: int, xy: np.ndarray) -> np.ndarray:
+    def contains(self, k: int, xy: np.ndarray) -> np.ndarray:
         """Indices of the points (m, 2) inside zone k, shape (h,) ascending.
 
         Only points inside the zone's bounding box are tested (the rest cannot be inside).
@@ -219,8 +225,80 @@ class _ZoneMeter:
 
     def densities_of(self, inside: np.ndarray, width: float) -> np.ndarray:
         """Measured density per zone from `inside_all`'s lengths (zones, m) (NaN where a zone has no area)."""
-        total = inside.sum(axis=1)
-        return np.array([total[k] * width / z.area if z.area > 0 else np.nan for k, z in enumerate(self.zones)])
+        return _densities(inside.sum(axis=1), self.areas, width)
+
+
+def _densities(lengths: np.ndarray, areas: np.ndarray, width: float) -> np.ndarray:
+    """Fill fraction per zone from line lengths (zones,) mm and areas (zones,) mm^2; NaN where no area."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(areas > 0, lengths * width / np.where(areas > 0, areas, 1.0), np.nan)
+
+
+class _RasterMeter:
+    """Length of segments inside zones given as a `ZoneRaster` (several sharp-border zones).
+
+    Each segment is cut into equal pieces no longer than a cell and each
+    piece counts for the zone of the cell holding its midpoint.  A zone's
+    area is its cells' area, so a density (length x width / area) is measured
+    on one and the same raster shape: the rounding of the border moves the
+    line and the area alike and the ratio stays that of the pattern.
+
+    Parameters
+    ----------
+    raster : ZoneRaster
+        Labels 0 .. zones - 1 (-1: in no zone): where lengths and areas are measured.
+    zones : int
+        Number of zones.
+    inner : ZoneRaster, optional
+        Where `contains` finds points (refinement inserts there); default `raster`.
+    """
+
+    def __init__(self, raster: ZoneRaster, zones: int, inner: ZoneRaster | None = None):
+        self.raster = raster
+        self.inner = raster if inner is None else inner
+        self.count = zones
+        self.areas = raster.counts(zones) * raster.cell**2  # (zones,) mm^2
+        labelled = raster.labels >= 0
+        rows, cols = np.flatnonzero(labelled.any(axis=1)), np.flatnonzero(labelled.any(axis=0))
+        cell = raster.cell
+        self.extent = None if rows.size == 0 else (  # the labelled cells' box, mm
+            raster.x0 + cell * cols[0], raster.y0 + cell * rows[0],
+            raster.x0 + cell * (cols[-1] + 1), raster.y0 + cell * (rows[-1] + 1))
+
+    def inside_all(self, segments: np.ndarray) -> np.ndarray:
+        """Length (mm) of each segment (m, 2, 2) inside each zone, shape (zones, m)."""
+        segments = np.asarray(segments, dtype=float).reshape(-1, 2, 2)
+        out = np.zeros((self.count, len(segments)))
+        if self.extent is None or len(segments) == 0:
+            return out
+        x0, y0, x1, y1 = self.extent
+        lo, hi = segments.min(axis=1), segments.max(axis=1)
+        touching = np.flatnonzero((hi[:, 0] >= x0) & (lo[:, 0] <= x1) & (hi[:, 1] >= y0) & (lo[:, 1] <= y1))
+        if touching.size == 0:
+            return out
+        start = segments[touching, 0]
+        step = segments[touching, 1] - start
+        length = np.hypot(step[:, 0], step[:, 1])
+        n = np.maximum(1, np.ceil(length / self.raster.cell)).astype(np.intp)
+        seg = np.repeat(np.arange(touching.size), n)
+        frac = (np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n) + 0.5) / n[seg]
+        label = self.raster.at(start[seg] + step[seg] * frac[:, None])
+        hit = label >= 0
+        total = np.bincount(label[hit] * touching.size + seg[hit], (length / n)[seg[hit]], self.count * touching.size)
+        out[:, touching] = total.reshape(self.count, touching.size)
+        return out
+
+    def inside(self, segments: np.ndarray, k: int) -> np.ndarray:
+        """Length (mm) of each segment (m, 2, 2) inside zone k, shape (m,)."""
+        return self.inside_all(segments)[k]
+
+    def contains(self, k: int, xy: np.ndarray) -> np.ndarray:
+        """Indices of the points (m, 2) inside zone k (of `inner`), shape (h,) ascending."""
+        return np.flatnonzero(self.inner.at(xy) == k)
+
+    def densities_of(self, inside: np.ndarray, width: float) -> np.ndarray:
+        """Measured density per zone from `inside_all`'s lengths (zones, m) (NaN where a zone has no area)."""
+        return _densities(inside.sum(axis=1), self.areas, width)
 
 
 def _quick_tree(points: np.ndarray) -> cKDTree:
@@ -299,7 +377,10 @@ class InfillPattern:
     layout, calibration : str
     calibrated_densities : list of float
         Measured density per zone of the footprint after calibration (away
-        from borders between zones: `_zone_interiors`).
+        from borders between zones: `_zone_interiors`; with several
+        sharp-border zones on a raster of the zones, also away from the
+        footprint's outline where a zone keeps most of itself:
+        `_raster_interiors`).
     """
 
     segments: np.ndarray
@@ -381,11 +462,14 @@ class InfillPattern:
 
     @classmethod
     def _build_seamless(cls, area, dmap, width, seed, calibration, relax, sampler):
-        zones = dmap.zones(area)
-        if dmap.feather > 0:  # calibrate the zone cores, not the blend bands between them
-            cores = [to_multipolygon(z.buffer(-0.5 * dmap.feather)) for z in zones]
-            zones = [core if core.area > 0 else z for core, z in zip(cores, zones)]
-        zones = _zone_interiors(zones, width, None if dmap.feather > 0 else area)
+        meter = _raster_meter(area, dmap, width) if dmap.feather <= 0 and dmap.regions else None
+        if meter is None:
+            zones = dmap.zones(area)
+            if dmap.feather > 0:  # calibrate the zone cores, not the blend bands between them
+                cores = [to_multipolygon(z.buffer(-0.5 * dmap.feather)) for z in zones]
+                zones = [core if core.area > 0 else z for core, z in zip(cores, zones)]
+            meter = _ZoneMeter(_zone_interiors(zones, width, None if dmap.feather > 0 else area))
+        zone_areas = meter.areas
         targets = np.array(dmap.densities)
         lowest = float(min(targets))
         reach = 1.3 * (paper_radius(lowest, width) if calibration == "paper" else KAPPA * width / lowest)
@@ -394,17 +478,16 @@ class InfillPattern:
         tol = 0.05 * reach
         sampling_area = to_multipolygon(area.simplify(tol).buffer(reach + tol, 8))
         radius_of = (lambda d: paper_radius(d, width)) if calibration == "paper" else (lambda d: KAPPA * width / d)
-        settled = np.array([z.area > 0 for z in zones])
+        settled = zone_areas > 0
         # Zones under about 4 x 4 of their own radii cannot be calibrated by the
         # radius alone; they are balanced by thinning or refinement at the end.
         # (A single zone is fine-tuned by scaling instead.)
-        small = settled & np.array([z.area < 16.0 * radius_of(t) ** 2 for z, t in zip(zones, targets)])
+        small = settled & np.array([a < 16.0 * radius_of(t) ** 2 for a, t in zip(zone_areas.tolist(), targets)])
         small &= np.count_nonzero(settled) > 1
         # Zones under about 6 x 6 of their radii hold a few dozen samples: one sampling to the
         # next moves them by several points, so re-sampling for them alone is noise.
-        coarse = settled & np.array([z.area < _COARSE * radius_of(t) ** 2 for z, t in zip(zones, targets)])
+        coarse = settled & np.array([a < _COARSE * radius_of(t) ** 2 for a, t in zip(zone_areas.tolist(), targets)])
         factors = np.ones(len(targets))
-        meter = _ZoneMeter(zones)
         # A single zone is calibrated by scaling one sampling (continuous, cheap) as soon as
         # the scale needed is within reach; re-sampling only moves it by jumps of 1-2 points.
         single = calibration == "measured" and np.count_nonzero(settled) == 1
@@ -417,10 +500,21 @@ class InfillPattern:
             def radius_fn(xy, scaled=scaled):
                 return radius_of(scaled.at(xy))
 
-            points = sample_poisson_disk(sampling_area, radius_fn, seed=seed, method=sampler)
-            if relax:
-                points = relax_points(points, sampling_area, radius_fn, relax, seed=seed)
-            triangles = _drop_slivers(points, delaunay_triangles(points), radius_fn)
+            # Several zones may be balanced by refinement afterwards: it goes on from qhull's
+            # incremental triangulation of the samples (the same triangles), the sampler's own
+            # when it made one.
+            growing = None
+            if not single and calibration == "measured" and sampler == "fast" and not relax:
+                points, qhull = sample_triangulated(sampling_area, radius_fn, seed=seed)
+                growing = GrowingDelaunay(points, qhull) if qhull is not None else _growing_delaunay(points)
+            else:
+                points = sample_poisson_disk(sampling_area, radius_fn, seed=seed, method=sampler)
+                if relax:
+                    points = relax_points(points, sampling_area, radius_fn, relax, seed=seed)
+                if not single and calibration == "measured":
+                    growing = _growing_delaunay(points)
+            triangles = delaunay_triangles(points) if growing is None else growing.add(np.zeros((0, 2)))
+            triangles = _drop_slivers(points, triangles, radius_fn)
             edges = unique_edges(triangles)
             segments = points[edges]
             inside = meter.inside_all(segments)
@@ -430,7 +524,7 @@ class InfillPattern:
             error = np.where(small & (measured > targets), 0.25 * error, error)
             worst = float(np.nanmax(np.where(settled, error, 0.0))) if len(error) else 0.0
             if best is None or worst < best[0]:
-                best = (worst, points, triangles, segments, measured, iteration, edges, inside)
+                best = (worst, points, triangles, segments, measured, iteration, edges, inside, growing)
             if calibration == "paper" or worst <= (_TOLERANCE if single else _LOOP_TOLERANCE):
                 break
             ok = settled & np.isfinite(measured) & (measured > 0)
@@ -461,7 +555,7 @@ class InfillPattern:
             # full steps would oscillate; zones that fall short take full steps
             # up, since what ends up too dense can be thinned afterwards.
             factors = factors * np.where(small & (step > 1.0), step, np.sqrt(step))
-        worst, points, triangles, segments, measured, iteration, edges, inside = best
+        worst, points, triangles, segments, measured, iteration, edges, inside, growing = best
         if single and worst > _TOLERANCE / 4:
             points, segments, measured = _fine_tune_scale(points, edges, meter, targets, measured, width,
                                                           scale_limit, area)
@@ -472,7 +566,7 @@ class InfillPattern:
             # The edges' inside lengths are known already: balancing measures only new edges.
             known = {"keys": _edge_keys(edges), "values": inside}
             points, triangles, segments, measured = _balance_zones(points, triangles, meter, targets, width, off,
-                                                                   known=known)
+                                                                   known=known, growing=growing)
         return cls(segments, points, triangles, area, dmap, width, "seamless", calibration, list(measured), iteration)
 
     @classmethod
@@ -560,6 +654,131 @@ class InfillPattern:
         }
 
 
+def _raster_meter(area, dmap: DensityMap, width: float):
+    """A `_RasterMeter` of the zone interiors of a sharp-border density map over `area`.
+
+    The cell is `_CELL` line widths, larger when the footprint's box would
+    need more than `_MAX_CELLS` cells.  None (measure exactly, `_ZoneMeter`)
+    when fewer than two zones have cells (a single zone is calibrated to a
+    tighter tolerance), or when the cell grew wider than a line and a zone
+    has under `_FEW_CELLS` cells.
+    """
+    x0, y0, x1, y1 = area.bounds
+    cell = max(_CELL * width, math.sqrt(max(x1 - x0, 0.0) * max(y1 - y0, 0.0) / _MAX_CELLS))
+    zones = len(dmap.densities)
+    raster = dmap.raster(area, cell)
+    if raster is None:
+        return None
+    counts = raster.counts(zones)
+    present = counts[counts > 0]
+    if present.size < 2 or (cell > width and present.min() < _FEW_CELLS):
+        return None  # one zone; or a zone of a few cells wider than a line (a large part): exact
+    measured, inner = _raster_interiors(raster, zones, width, _OUTLINE * width)
+    return _RasterMeter(measured, zones, inner)
+
+
+def _raster_interiors(raster: ZoneRaster, zones: int, width: float, outline: float = 0.0) -> tuple[ZoneRaster, ZoneRaster]:
+    """`_zone_interiors` on a raster: each zone without the cells within a line width of another zone.
+
+    Also without the cells within `outline` of the area's outline (the zones
+    are then calibrated on what a layer's report measures: the pattern's
+    footprint is the layers' infill area grown by a width, and the report
+    leaves out a width along the layer's outline) where the zone keeps 70 %
+    of its cells; a zone mostly along the outline (too few cells left to
+    measure) loses only the band along other zones.  A zone that would keep under 30 % of its cells even
+    so is kept whole (a strip narrower than about 1.4 widths along one
+    border, or swallowed by bands on both sides; cutting cells is cheap, so
+    no separate rule for narrow zones is needed).
+
+    Parameters
+    ----------
+    raster : ZoneRaster
+        Zone labels 0 .. zones - 1 (-1: outside the area).
+    zones : int
+    width : float
+        Line width, mm.
+    outline : float
+        Band along the area's outline, mm (0: none).
+
+    Returns
+    -------
+    (ZoneRaster, ZoneRaster)
+        The interiors (band cells -1); and the zones without the band along
+        other zones only (the 30 % rule alone).
+    """
+    labels, cell = raster.labels, raster.cell
+    ny, nx = labels.shape
+    # A cell is in the band when its centre is within `reach` of the centre of a border cell
+    # (those on this side lie about half a cell inside the border).
+    reach = [max(band - 0.5 * cell, 0.0) / cell for band in (width, outline)]
+    pad = max(1, math.floor(max(reach)))
+    # Flat, framed by `pad` cells of -1 (rows above and below, columns after each row, also
+    # before the next row's first cell): an offset within the band's reach never wraps round.
+    row = nx + pad
+    framed = np.full((ny + 2 * pad, row), -1, dtype=labels.dtype)
+    framed[pad:-pad, :nx] = labels
+    flat = framed.ravel()
+    borders = ([], [])  # cells next to a cell of another zone; cells next to the outside
+    for step in (1, row):
+        here = np.flatnonzero(flat[step:] != flat[:-step])
+        there = here + step
+        a, b = flat[here], flat[there]
+        between = (a >= 0) & (b >= 0)
+        borders[0].extend((here[between], there[between]))
+        borders[1].extend((here[(a >= 0) & (b < 0)], there[(a < 0) & (b >= 0)]))
+    counts = raster.counts(zones)
+    kept = counts.copy()
+    bands = []  # (cells, their labels, cells each zone loses): along other zones; along both
+    in_band = np.zeros(flat.size, dtype=bool)
+    for border, band, r in zip(borders, (width, outline), reach):
+        border = np.concatenate(border)
+        if border.size and band > 0:
+            seeds = np.zeros(flat.size, dtype=bool)
+            seeds[border] = True
+            in_band |= _dilate(seeds, r, row)
+        cells = np.flatnonzero(in_band)
+        label = flat[cells].astype(np.intp)
+        bands.append((cells, label, np.bincount(label + 1, minlength=zones + 1)[1:]))
+    # Both bands where the zone keeps 70 % of its cells; else the band along other zones where it
+    # keeps 30 % (a small zone is measured on too few cells otherwise); else the whole zone.
+    apart = (counts > 0) & (counts - bands[0][2] >= 0.3 * counts)  # the band along other zones only
+    both = (counts > 0) & (counts - bands[1][2] >= _KEEP_OUTLINE * counts)
+    inner = framed.copy()  # the band along other zones only: where refinement inserts
+    cells, label, lost = bands[0]
+    inner.ravel()[cells[np.append(apart, False)[label]]] = -1  # (label -1: nothing to cut)
+    inner = ZoneRaster(inner[pad:-pad, :nx], raster.x0, raster.y0, cell, [counts - np.where(apart, lost, 0)])
+    for (cells, label, lost), cut in zip(bands, (apart & ~both, both)):
+        if cut.any():
+            flat[cells[np.append(cut, False)[label]]] = -1
+            kept -= np.where(cut, lost, 0)
+    return ZoneRaster(framed[pad:-pad, :nx], raster.x0, raster.y0, cell, [kept]), inner
+
+
+def _dilate(mask: np.ndarray, reach: float, row: int) -> np.ndarray:
+    """Cells (flat bool mask of rows of `row` cells) within `reach` cells of a cell of `mask`.
+
+    The disk is taken row by row: the mask widened along the rows by each
+    half-width the disk has, then moved up and down to the rows where the
+    disk is that wide (about 4 x reach whole-array operations).  Cells within
+    `reach` of the mask's first and last rows and columns must be frame
+    (nothing wraps round).
+    """
+    r = math.floor(reach + 1e-9)
+    widened = [mask]
+    for dx in range(1, r + 1):
+        wider = widened[-1].copy()
+        wider[dx:] |= mask[:-dx]
+        wider[:-dx] |= mask[dx:]
+        widened.append(wider)
+    out = widened[r].copy()
+    for dy in range(1, r + 1):
+        half = widened[math.floor(math.sqrt(max(reach * reach - dy * dy, 0.0)) + 1e-9)]
+        step = dy * row
+        out[step:] |= half[:-step]
+        out[:-step] |= half[step:]
+    return out
+
+
 def _zone_interiors(zones: list, width: float, tiled=None) -> list:
     """Zones without a band of one line width along their borders with other zones.
 
@@ -619,8 +838,8 @@ def _fine_tune_scale(points, edges, meter, targets, measured, width, limit, area
     (points, segments, measured)
         Scaled points (n, 2), their edges (k, 2, 2), measured density per zone.
     """
-    zone_index = next(k for k, z in enumerate(meter.zones) if z.area > 0)
-    zone_area, target = meter.zones[zone_index].area, targets[zone_index]
+    zone_index = int(np.flatnonzero(meter.areas > 0)[0])
+    zone_area, target = float(meter.areas[zone_index]), targets[zone_index]
     center = np.asarray(area.centroid.coords[0])
     base = points[edges]
 
@@ -649,11 +868,11 @@ def _fine_tune_scale(points, edges, meter, targets, measured, width, limit, area
             break
     _, scale, density = best
     scaled = center + (points - center) * scale
-    measured = [float(density) if k == zone_index else float("nan") for k in range(len(meter.zones))]
+    measured = [float(density) if k == zone_index else float("nan") for k in range(len(meter.areas))]
     return scaled, scaled[edges], measured
 
 
-def _balance_zones(points, triangles, meter, targets, width, small, rounds: int = 12, known=None):
+def _balance_zones(points, triangles, meter, targets, width, small, rounds: int = 12, known=None, growing=None):
     """Bring zones that calibration cannot reach to their targets.
 
     A zone smaller than about two of its own radii cannot reach its target in
@@ -662,22 +881,32 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
     keep their larger radius free).  Each round thins the zones that print
     too dense (`_thin_dense_zones`), then inserts circumcentres of the widest
     triangles in zones that print too sparse (Delaunay refinement: edges go
-    where the zone is emptiest and the triangulation stays Delaunay).
+    where the zone is emptiest and the triangulation stays Delaunay).  The
+    rounds stop when no zone is short, or after two rounds that did not make
+    the largest shortfall smaller (the best round is kept).
 
-    Only the zones flagged in `small` are balanced; `meter` (`_ZoneMeter`)
-    holds the zones and measures them; `known` (see `_inside_lengths`) may
-    hold the inside lengths of the triangles' edges already.
+    Only the zones flagged in `small` are balanced; `meter` (`_ZoneMeter` or
+    `_RasterMeter`) holds the zones and measures them; `known` (see
+    `_inside_lengths`) may hold the inside lengths of the triangles' edges
+    already; `growing` (`GrowingDelaunay`), a triangulation of `points` to
+    go on from.
 
     Returns
     -------
     (points, triangles, segments, measured)
     """
     known = {} if known is None else known  # edges measured (points are only appended: indices stay)
-    growing = None  # qhull's triangulation, points added round by round
-    for _ in range(rounds):
+    # `growing`: qhull's triangulation, points added round by round
+    best = None  # (largest shortfall, round, points, triangles, segments, measured) of the best round
+    for turn in range(rounds):
         segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known)
         short = [k for k in np.flatnonzero(small) if measured[k] < targets[k] - _TOLERANCE]
-        if not short:
+        shortfall = max((targets[k] - measured[k] for k in short), default=0.0)
+        if best is None or shortfall < best[0]:
+            best = (shortfall, turn, points, triangles, segments, measured)
+        # Done; or two rounds without a smaller shortfall: refining one zone takes from
+        # another (they share the new edges), the rounds go back and forth.
+        if not short or turn - best[1] >= 2:
             break
         # In a fixed order from a fixed corner: the centres do not depend on how qhull lists them.
         tri = canonical_triangles(triangles)
@@ -693,12 +922,12 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
         radius = np.where(ok, np.hypot(*(center - a).T), 0.0)
         added = []
         for k in short:
-            inside = meter._contains(k, center)  # ascending, as flatnonzero of the full test
+            inside = meter.contains(k, center)  # ascending, as flatnonzero of the full test
             if inside.size == 0:
                 continue
             # About 3 circumradii of line per insertion; at most a third of
             # the zone's triangles per round.
-            missing = (targets[k] - measured[k]) * meter.zones[k].area / width
+            missing = (targets[k] - measured[k]) * meter.areas[k] / width
             widest = inside[np.argsort(-radius[inside])]
             count = int(np.clip(missing / max(3.0 * radius[widest[0]], 1e-9), 1, max(1, inside.size // 3)))
             added.append(center[widest[:count]])
@@ -718,6 +947,10 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
             triangles = delaunay_triangles(points)
     else:
         segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known)
+        short = [k for k in np.flatnonzero(small) if measured[k] < targets[k] - _TOLERANCE]
+        if best is None or max((targets[k] - measured[k] for k in short), default=0.0) < best[0]:
+            return points, triangles, segments, measured
+    _, _, points, triangles, segments, measured = best
     return points, triangles, segments, measured
 
 
@@ -771,11 +1004,11 @@ def _thin_dense_zones(points, triangles, meter, targets, width, small, known=Non
     # Edges at each vertex, kept up to date as edges are left out (plain ints: the walk below
     # is sequential, and plain Python numbers are cheaper there than numpy scalars).
     degree = np.bincount(edges.ravel(), minlength=n).tolist()
-    for k, (zone, target, thin) in enumerate(zip(meter.zones, targets, small)):
-        if not thin or zone.is_empty or zone.area <= 0:
+    for k, (zone_area, target, thin) in enumerate(zip(meter.areas.tolist(), targets, small)):
+        if not thin or zone_area <= 0:
             continue
         inside = np.where(keep, inside_of[k], 0.0)
-        excess = (inside.sum() * width / zone.area - target) * zone.area / width  # mm of line too many
+        excess = (inside.sum() * width / zone_area - target) * zone_area / width  # mm of line too many
         if excess <= 0:
             continue
         candidates = np.flatnonzero(keep & (inside >= 0.5 * length))
@@ -799,8 +1032,8 @@ def _thin_dense_zones(points, triangles, meter, targets, width, small, known=Non
                 opened.discard(-1)  # -1: no triangle on that side
                 excess -= piece
         keep[candidates[left_out]] = False
-    measured = [float(inside_of[k][keep].sum()) * width / z.area if z.area > 0 else float("nan")
-                for k, z in enumerate(meter.zones)]
+    measured = [float(inside_of[k][keep].sum()) * width / area if area > 0 else float("nan")
+                for k, area in enumerate(meter.areas.tolist())]
     return segments[keep], measured
 
 
@@ -812,10 +1045,10 @@ def _inside_lengths(edges, segments, meter, known: dict) -> np.ndarray:
     """
     key = _edge_keys(edges)
     old_keys = known.get("keys", np.zeros(0, np.int64))
-    old_values = known.get("values", np.zeros((len(meter.zones), 0)))
+    old_values = known.get("values", np.zeros((len(meter.areas), 0)))
     slot = np.minimum(np.searchsorted(old_keys, key), max(len(old_keys) - 1, 0))
     hit = (old_keys[slot] == key) if len(old_keys) else np.zeros(len(key), dtype=bool)
-    values = np.zeros((len(meter.zones), len(edges)))
+    values = np.zeros((len(meter.areas), len(edges)))
     values[:, hit] = old_values[:, slot[hit]]
     new = np.flatnonzero(~hit)
     if new.size:

@@ -370,7 +370,7 @@ def _variable_level(area, spacing: float, r_lo: float, radius_fn, seed: int):
     return pts[chosen], r[chosen]
 
 
-def _sample_fast(area, radius_fn, seed: int) -> np.ndarray:
+def _sample_fast(area, radius_fn, seed: int, keep: list | None = None) -> np.ndarray:
     r_lo, r_hi = _radius_range(area, radius_fn)
     spacing = _CANDIDATE_SPACING * r_lo
     expected = area.area / (spacing * spacing)
@@ -382,7 +382,7 @@ def _sample_fast(area, radius_fn, seed: int) -> np.ndarray:
     if r_hi <= r_lo * (1 + 1e-12):
         return _fill_gaps_constant(area, _uniform_level(area, spacing, r_lo, seed), r_lo)
     samples, samples_r = _variable_level(area, spacing, r_lo, radius_fn, seed)
-    return _fill_gaps_variable(area, samples, samples_r, radius_fn)
+    return _fill_gaps_variable(area, samples, samples_r, radius_fn, keep=keep)
 
 
 # --------------------------------------------------------------------------- gap filling
@@ -617,7 +617,7 @@ def _fill_gaps_constant(area, samples: np.ndarray, radius: float) -> np.ndarray:
     return samples
 
 
-def _fill_gaps_variable(area, samples, samples_r, radius_fn, passes: int = 6):
+def _fill_gaps_variable(area, samples, samples_r, radius_fn, passes: int = 6, keep: list | None = None):
     """Insert circumcentres of empty circles wider than the radius (variable r).
 
     A Delaunay triangle whose circumradius exceeds the radius at its
@@ -625,6 +625,8 @@ def _fill_gaps_variable(area, samples, samples_r, radius_fn, passes: int = 6):
     independent subset per pass) makes the set maximal.  (With a variable
     radius a sample may not go wherever no disk reaches: it must also keep its
     own radius free, so the gaps are sought among the circumcentres.)
+    `keep`: a list that gets qhull's incremental triangulation of the samples
+    returned (left open), when there is one.
     """
     from scipy.spatial import Delaunay, QhullError
 
@@ -667,7 +669,10 @@ def _fill_gaps_variable(area, samples, samples_r, radius_fn, passes: int = 6):
         samples = np.r_[samples, center[won]]
         samples_r = np.r_[samples_r, rc[won]]
         triangulation.add_points(center[won])
-    triangulation.close()
+    if keep is None:
+        triangulation.close()
+    else:
+        keep.append(triangulation)
     return samples
 
 
@@ -799,6 +804,21 @@ def sample_poisson_disk(region, radius: RadiusLike, *, seed: int = 0, method: st
     if method == "bridson":
         return _sample_bridson(area, radius_fn, int(seed))
     raise ValueError(f"method must be 'fast' or 'bridson', got {method!r}")
+
+
+def sample_triangulated(region, radius: RadiusLike, *, seed: int = 0):
+    """`sample_poisson_disk` (``fast``) and, where its gap filling triangulated them, the triangulation.
+
+    Returns
+    -------
+    (ndarray, shape (n, 2); scipy.spatial.Delaunay or None)
+        The samples, and qhull's incremental triangulation of exactly them
+        (left open for more points: see `triangulation.GrowingDelaunay`), or
+        None (a constant radius, or too few samples).
+    """
+    keep = []
+    points = _sample_fast(as_area(region), radius_function(radius), int(seed), keep)
+    return points, (keep[0] if keep else None)
 
 
 def uncovered_fraction(region, samples: np.ndarray, radius: RadiusLike, *, spacing: float | None = None) -> float:

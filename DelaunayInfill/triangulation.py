@@ -71,11 +71,15 @@ class GrowingDelaunay:
     points : ndarray, shape (n, 2)
         At least 3 points, not all collinear (else qhull's error is raised:
         ``scipy.spatial.QhullError`` or ValueError).
+    qhull : scipy.spatial.Delaunay, optional
+        An incremental triangulation of `points` (not closed) to take over
+        instead of triangulating them again.
     """
 
-    def __init__(self, points: np.ndarray):
+    def __init__(self, points: np.ndarray, qhull=None):
         self.points = np.asarray(points, dtype=float)
-        self._qhull = Delaunay(self.points, incremental=True)
+        # `qhull`: an open incremental ``scipy.spatial.Delaunay`` of exactly these points, to go on from.
+        self._qhull = Delaunay(self.points, incremental=True) if qhull is None else qhull
 
     def add(self, points: np.ndarray) -> np.ndarray:
         """Append points (m, 2); returns the triangles (t, 3) of all points, counter-clockwise."""

@@ -25,6 +25,8 @@ METHODS = ["fast", "bridson"]
 
 
 def min_pair_distance(points):
+    if len(points) < 2:  # no pair (a region too small for a candidate: no sample at all)
+        return np.inf
     d, _ = cKDTree(points).query(points, k=2)
     return d[:, 1].min()
 
@@ -195,6 +197,7 @@ def test_greedy_independent_set_is_independent_and_maximal(n, seed):
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 10_000), st.floats(0.4, 3.0))
 @example(791, 1.0)  # a region of 0.87 mm²: two samples, nothing to triangulate
+@example(343, 1.0)  # a region of 0.13 mm², no point of it a radius deep: no sample
 def test_fast_sampler_leaves_no_gap_inside(seed, r):
     """Exact maximality away from the border, also in pockets open to it (min angle >= 30 deg there)."""
     region = random_region(seed)
@@ -279,3 +282,28 @@ def test_close_pairs_with_and_without_trees_agree(monkeypatch, seed, n, m):
         got = np.zeros_like(want)
         got[i, j] = True
         assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_sampling_with_its_triangulation_hands_over_the_delaunay_of_the_samples(seed):
+    """sample_triangulated: the fast sampler's samples, and its gap filling's open triangulation of
+    exactly them, which goes on taking points (balancing) as a fresh one would."""
+    from DelaunayInfill.sampling import sample_triangulated
+    from DelaunayInfill.triangulation import GrowingDelaunay, canonical_triangles, delaunay_triangles
+
+    region = Point(0, 0).buffer(30, 32).difference(box(-4, -4, 4, 4))
+
+    def radius(xy):
+        return np.where(xy[:, 0] < 0, 1.5, 3.0)
+
+    points, qhull = sample_triangulated(region, radius, seed=seed)
+    np.testing.assert_array_equal(points, sample_poisson_disk(region, radius, seed=seed))
+    assert qhull is not None
+    growing = GrowingDelaunay(points, qhull)
+    same = canonical_triangles(growing.add(np.zeros((0, 2))))
+    np.testing.assert_array_equal(same, canonical_triangles(delaunay_triangles(points)))
+    extra = np.random.default_rng(seed).uniform(-20, 20, (15, 2))
+    grown = canonical_triangles(growing.add(extra))
+    np.testing.assert_array_equal(grown, canonical_triangles(delaunay_triangles(np.r_[points, extra])))
+    # A constant radius fills its gaps without a triangulation: none to hand over.
+    assert sample_triangulated(region, 2.0, seed=seed)[1] is None

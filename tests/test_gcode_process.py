@@ -561,3 +561,44 @@ def _fill_points(parse) -> np.ndarray:
     m = parse.moves
     fill = (m["kind"] == FILL) & (m["de"] > 0)
     return np.concatenate([np.column_stack([m["x0"][fill], m["y0"][fill]]), np.column_stack([m["x1"][fill], m["y1"][fill]])])
+
+
+def test_a_block_prints_at_the_layers_fill_rate_unless_its_own_differs_beyond_rounding():
+    """E per mm of a block's new lines: the layer's FILL rate when the block's own lines print at it to
+    Cura's rounding (1e-5 E per move), the mesh's when only that one fits, else the block's own."""
+    from DelaunayInfill.gcode.process import _block_rate
+
+    def layer(moves):  # (mesh, length mm, E) per move, along x
+        lines, x, e, mesh = [";LAYER:3", "G0 X0 Y0 Z0.6"], 0.0, 0.0, None
+        for name, length, de in moves:
+            if name != mesh:
+                lines += [f";MESH:{name}", ";TYPE:FILL"]
+                mesh = name
+            x, e = x + length, e + de
+            lines.append(f"G1 X{x:.3f} Y0 E{e:.5f}")
+        return parse_layer("\n".join(lines) + "\n", MachineState(), RetractionModel())
+
+    rate = 0.033260
+    # host: ten 10 mm moves at the rate; "a": one 1 mm move rounded 4e-6 off it; "b": 5 % more flow
+    parse = layer([("host", 10.0, 10 * rate)] * 10 + [("a", 1.0, round(rate + 4e-6, 5))] + [("b", 2.0, 2.1 * rate)] * 3)
+    m = parse.moves
+    extr = parse.extruding()
+    fill = extr & parse.kind_mask(FILL)
+    rates = {}
+    pooled = float(m["de"][fill & ~parse.mesh_mask("b")].sum() / parse.xy_length()[fill & ~parse.mesh_mask("b")].sum())
+    whole = float(m["de"][fill].sum() / parse.xy_length()[fill].sum())
+    a = _block_rate(parse, fill & parse.mesh_mask("a"), "a", fill, rates)
+    b = _block_rate(parse, fill & parse.mesh_mask("b"), "b", fill, rates)
+    host = _block_rate(parse, fill & parse.mesh_mask("host"), "host", fill, rates)
+    assert b == pytest.approx(1.05 * rate, rel=1e-4)  # its own: a real flow difference
+    assert rates[None] == pytest.approx(whole) and whole > pooled  # the layer's rate holds b's flow too
+    # a and the host do not print at the whole layer's rate (b pulls it up): each takes its mesh's
+    assert host == pytest.approx(rate, rel=1e-6)
+    assert a == rates["a"]
+    assert _block_rate(parse, np.zeros(len(m["de"]), dtype=bool), "a", fill, rates) is None
+    # without b, the layer's rate is the host's and "a" takes it (its own is 4e-6 E off: rounding)
+    parse = layer([("host", 10.0, 10 * rate)] * 10 + [("a", 1.0, round(rate + 4e-6, 5))])
+    fill = parse.extruding() & parse.kind_mask(FILL)
+    rates = {}
+    a = _block_rate(parse, fill & parse.mesh_mask("a"), "a", fill, rates)
+    assert a == rates[None] and abs(a - rate) < 1e-7

@@ -764,7 +764,7 @@ class _Run:
                     continue
                 # a block that extrudes nothing takes its mesh's FILL rate, else the layer's (both
                 # remembered for the layer: a modifier's travel-only blocks ask again and again)
-                epm = e_per_mm(parse, mask & extr) if extrudes else None
+                epm = _block_rate(parse, mask & extr, blk.mesh, extr & is_fill, layer_epm) if extrudes else None
                 if epm is None:
                     if blk.mesh not in layer_epm:
                         layer_epm[blk.mesh] = e_per_mm(parse, extr & is_fill & parse.mesh_mask(blk.mesh))
@@ -1068,6 +1068,43 @@ class _Run:
             measured = t.length / t.area if t.area > 1e-9 else float("nan")
             r.regions.append(RegionReport(name, t.target, measured, t.area))
         return patch_header(header, self.time_delta, self.e_before, self.e_delta, self.s, volumetric=self.info.volumetric)
+
+
+def _block_rate(parse: LayerParse, moves: np.ndarray, mesh: str, fill: np.ndarray, rates: dict) -> float | None:
+    """E per mm of path for a FILL block's new lines (E units/mm; None: the block prints nothing).
+
+    Cura's rate for the layer's FILL (all of it, else the block's mesh's) when the block's own moves
+    print at it to Cura's rounding (1e-5 E per move), else the block's own.  A rate taken from more
+    moves carries less of that rounding: a block with a few short lines of its own would otherwise
+    pass their rounding on to every new line, differently from layer to layer.
+
+    Parameters
+    ----------
+    parse : LayerParse
+    moves : ndarray of bool, shape (n,)
+        The block's extruding moves.
+    mesh : str
+        The block's mesh.
+    fill : ndarray of bool, shape (n,)
+        The layer's extruding FILL moves.
+    rates : dict
+        The layer's rates by mesh (None: all FILL), filled in as they are asked for.
+    """
+    de = parse.moves["de"][moves]
+    length = parse.xy_length()[moves]
+    ok = (length > 1e-6) & (de > 0)
+    own_length = float(length[ok].sum())
+    if not ok.any() or own_length < 1e-3:
+        return None
+    own_e = float(de[ok].sum())
+    slack = 1e-5 * int(ok.sum())
+    for key in (None, mesh):
+        if key not in rates:
+            rates[key] = e_per_mm(parse, fill if key is None else fill & parse.mesh_mask(key))
+        rate = rates[key]
+        if rate is not None and abs(own_e - rate * own_length) <= slack:
+            return rate
+    return own_e / own_length
 
 
 class _TravelCost:

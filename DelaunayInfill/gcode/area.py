@@ -368,13 +368,7 @@ def _owner_grid(area, fills: list[np.ndarray], spacings: list[float], step: floa
     # The cells round those too (the area's border runs through them): owned cells reach past the
     # border, so cutting them to the area leaves no staircase of free cells along it (a host sliver
     # at every step, each cut out and handed to a modifier in turn).
-    by_rows = centred.copy()
-    by_rows[1:] |= centred[:-1]
-    by_rows[:-1] |= centred[1:]
-    owned = by_rows.copy()
-    owned[:, 1:] |= by_rows[:, :-1]
-    owned[:, :-1] |= by_rows[:, 1:]
-    owned = owned.ravel()
+    owned = _grown(centred).ravel()
     grid = np.full((len(ys), len(xs)), -1, dtype=np.int64)
     rows, cols = np.divmod(np.flatnonzero(owned), len(xs))
     pts = np.column_stack([xs[cols], ys[rows]])

@@ -29,19 +29,7 @@ from shapely.geometry import LineString, MultiLineString, MultiPoint, MultiPolyg
 from shapely.ops import polygonize, unary_union
 
 from DelaunayInfill.gcode import ProcessSettings, process
-from DelaunayInfill.gcode.area import (
-    _inside_lattice,
-    _nearest_mesh,
-    _nearest_within,
-    _owner_grid,
-    _OwnerGrid,
-    between_lines,
-    line_families,
-    median_of,
-    sample_segments,
-    span_pieces,
-    split_by_line_ends,
-)
+from DelaunayInfill.gcode.area import median_of, sample_segments
 from DelaunayInfill.gcode.infer import nearest_sample_distance
 from DelaunayInfill.gcode.read import (
     WALL_INNER,
@@ -50,6 +38,17 @@ from DelaunayInfill.gcode.read import (
     RetractionModel,
     as_cura_list,
     parse_layer,
+)
+from DelaunayInfill.gcode.split import (
+    _inside_lattice,
+    _nearest_mesh,
+    _nearest_within,
+    _owner_grid,
+    _OwnerGrid,
+    between_lines,
+    line_families,
+    span_pieces,
+    split_by_line_ends,
 )
 from DelaunayInfill.geometry import (
     contains_xy,

@@ -281,7 +281,7 @@ def _grid_lines(region, spacing: float, angles=(45.0, 135.0), phase: float = 0.3
 def test_modifier_shape_from_where_cura_s_lines_end(modifier_density):
     """An infill_mesh modifier's area is rebuilt from where its and its host's lines end: within
     2 % of its area (the nearest-line split is off by a band of up to half a spacing)."""
-    from DelaunayInfill.gcode.area import split_by_line_ends, split_by_lines
+    from DelaunayInfill.gcode.split import split_by_line_ends, split_by_lines
 
     lw, overlap = 0.4, 0.04
     inset = lw / 2 - overlap

@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 from ..combing import CombingArea, segments_inside
 from ..geometry import contains_xy, empty_area, polygons_of, to_multipolygon, unary_union
 from ..routing import order_paths
-from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of, split_by_line_ends
+from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of
 from .emit import EmitParams, emit_block
 from .estimate import move_seconds, move_times
 from .infer import e_per_mm, infill_density, wall_line_width
@@ -54,6 +54,7 @@ from .replay import (
     splice_blocks,
 )
 from .settings import MeshSettings, ProcessReport, ProcessSettings, Region, RegionReport
+from .split import split_by_line_ends
 
 __all__ = [
     "process_gcode",

@@ -81,23 +81,6 @@ class _OwnerGrid:
         gx, gy = np.meshgrid(self.x0 + (np.arange(cols) + 0.5) * self.step, self.y0 + (np.arange(rows) + 0.5) * self.step)
         return np.stack([gx, gy], axis=-1)
 
-    def inside(self, geometry) -> np.ndarray:
-        """Whether each cell's centre lies inside `geometry`, shape (rows, cols); only its bounding box is tested."""
-        rows, cols = self.owner.shape
-        out = np.zeros((rows, cols), dtype=bool)
-        if geometry.is_empty:
-            return out
-        minx, miny, maxx, maxy = geometry.bounds
-        j0 = max(0, int(np.floor((minx - self.x0) / self.step)) - 1)
-        j1 = min(cols, int(np.ceil((maxx - self.x0) / self.step)) + 1)
-        i0 = max(0, int(np.floor((miny - self.y0) / self.step)) - 1)
-        i1 = min(rows, int(np.ceil((maxy - self.y0) / self.step)) + 1)
-        if j0 >= j1 or i0 >= i1:
-            return out
-        out[i0:i1, j0:j1] = _inside_lattice(geometry, self.x0 + (np.arange(j0, j1) + 0.5) * self.step,
-                                            self.y0 + (np.arange(i0, i1) + 0.5) * self.step)
-        return out
-
     def polygon(self, mask: np.ndarray):
         """The cells where `mask` (rows, cols) holds, as one area (exactly those cells, corners on the grid)."""
         if not mask.any():

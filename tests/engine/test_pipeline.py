@@ -74,6 +74,10 @@ def test_4_region_densities_within_two_points(processed, parsed_pair):
     # Every case, the paper's Figure 10 included, within the 2 points (checked with the true
     # modifier shapes; the pipeline rebuilds them from where Cura's lines end).
     result = gc.check_region_densities(new, geometry, settings, case.regions(), tolerance=0.02)
+    measured = {name: v for name, v in result.figures.items() if isinstance(v, tuple) and v[1] is not None}
+    worst = max((abs(v[1] - v[0]) for v in measured.values()), default=0.0)
+    print(f"\n[check 4] {case.name} {os.path.basename(processed.path)}: worst {worst:.2f} points; "
+          + ", ".join(f"{name} {v[0]:g} -> {v[1]:.2f} %" for name, v in measured.items()))
     assert result.ok, result.report()
 
 

@@ -900,8 +900,7 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
     best = None  # (largest shortfall, round, points, triangles, segments, measured) of the best round
     for turn in range(rounds):
         segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known)
-        short = [k for k in np.flatnonzero(small) if measured[k] < targets[k] - _TOLERANCE]
-        shortfall = max((targets[k] - measured[k] for k in short), default=0.0)
+        short, shortfall = _shortfall(measured, targets, small)
         if best is None or shortfall < best[0]:
             best = (shortfall, turn, points, triangles, segments, measured)
         # Done; or two rounds without a smaller shortfall: refining one zone takes from
@@ -947,11 +946,16 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
             triangles = delaunay_triangles(points)
     else:
         segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known)
-        short = [k for k in np.flatnonzero(small) if measured[k] < targets[k] - _TOLERANCE]
-        if best is None or max((targets[k] - measured[k] for k in short), default=0.0) < best[0]:
+        if best is None or _shortfall(measured, targets, small)[1] < best[0]:
             return points, triangles, segments, measured
     _, _, points, triangles, segments, measured = best
     return points, triangles, segments, measured
+
+
+def _shortfall(measured, targets, small) -> tuple[list, float]:
+    """The zones flagged in `small` that print below target (by more than the tolerance), and the largest gap."""
+    short = [k for k in np.flatnonzero(small) if measured[k] < targets[k] - _TOLERANCE]
+    return short, max((targets[k] - measured[k] for k in short), default=0.0)
 
 
 def _growing_delaunay(points):

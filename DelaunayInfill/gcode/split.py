@@ -192,6 +192,11 @@ def _inside_lattice(area, xs: np.ndarray, ys: np.ndarray, tol: float = 1e-9) -> 
     return inside
 
 
+def _in_box(pts: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Indices of the points (p, 2) inside the box from corner `lo` (2,) to `hi` (2,), borders included."""
+    return np.flatnonzero((pts[:, 0] >= lo[0]) & (pts[:, 0] <= hi[0]) & (pts[:, 1] >= lo[1]) & (pts[:, 1] <= hi[1]))
+
+
 def _owner_grid(area, fills: list[np.ndarray], spacings: list[float], step: float) -> _OwnerGrid | None:
     """The nearest-line owner grid of `split_by_lines` (None: no area or no lines).
 
@@ -224,7 +229,7 @@ def _owner_grid(area, fills: list[np.ndarray], spacings: list[float], step: floa
                 # Points beyond the bound from the lines' bounding box are beyond it from the lines.
                 reach = bound * spacing
                 lo, hi = samples[k].min(axis=0) - reach, samples[k].max(axis=0) + reach
-                near = np.flatnonzero((pts[:, 0] >= lo[0]) & (pts[:, 0] <= hi[0]) & (pts[:, 1] >= lo[1]) & (pts[:, 1] <= hi[1]))
+                near = _in_box(pts, lo, hi)
                 dist[k, near] = tree.query(pts[near], distance_upper_bound=reach)[0] / spacing
         far = ~(dist.min(axis=0) < 0.99 * bound)  # 0.99: clear of rounding at the bound
         if far.any():
@@ -498,7 +503,7 @@ def _nearest_mesh(pts: np.ndarray, fills: list[np.ndarray], spacings: list[float
     for k in meshes:
         reach = bound * spacings[k]
         lo, hi = fills[k].min(axis=(0, 1)) - reach, fills[k].max(axis=(0, 1)) + reach
-        closer(k, np.flatnonzero((pts[:, 0] >= lo[0]) & (pts[:, 0] <= hi[0]) & (pts[:, 1] >= lo[1]) & (pts[:, 1] <= hi[1])))
+        closer(k, _in_box(pts, lo, hi))
     far = np.flatnonzero(~(best < 0.99 * bound))  # 0.99: clear of rounding at the bound
     if far.size:
         best[far], owner[far] = np.inf, -1
@@ -608,7 +613,7 @@ class _GapOwner:
                 # only the points within reach of the samples' box can be within reach of them
                 reach = self.spacings[k]
                 lo, hi = tree.mins - reach, tree.maxes + reach
-                near = np.flatnonzero((at[:, 0] >= lo[0]) & (at[:, 0] <= hi[0]) & (at[:, 1] >= lo[1]) & (at[:, 1] <= hi[1]))
+                near = _in_box(at, lo, hi)
                 if near.size:
                     dist[row, near] = tree.query(at[near], distance_upper_bound=reach)[0] / reach
             best = np.argmin(dist, axis=0)

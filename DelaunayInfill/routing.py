@@ -11,6 +11,10 @@
   ranking), without a Python loop over segments.
 * `order_paths` orders (and flips) chains to keep travel short: greedy
   nearest end, then 2-opt.
+* `plan_runs` shares one ordered route among blocks that must start and end
+  at given points (Cura's FILL blocks of a layer), cutting it where the least
+  travel is added (`route_cuts`, dynamic programming); `TravelCost` prices a
+  travel that leaves the part like a retraction.
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ from scipy.spatial import cKDTree
 
 from .geometry import boundary_segments, contains_xy
 
-__all__ = ["clip_segments", "chain_segments", "order_paths", "travel_length", "odd_vertex_count"]
+__all__ = ["clip_segments", "chain_segments", "order_paths", "travel_length", "odd_vertex_count", "TravelCost",
+           "plan_runs", "route_cuts"]
 
 _EPS = 1e-9
 _QUANTUM = 1e-5  # mm: endpoints closer than this are one vertex
@@ -414,3 +419,196 @@ def travel_length(paths: list[np.ndarray], start=None) -> float:
     if start is not None:
         total += float(np.hypot(*(heads[0] - np.asarray(start, dtype=float))))
     return total
+
+
+# ----------------------------------------------------------------------------- a route shared among blocks
+class TravelCost:
+    """Cost of straight travels: their length, plus `penalty` mm for each that leaves `part`."""
+
+    def __init__(self, part, penalty: float):
+        self.part = part
+        self.penalty = penalty
+
+    def __call__(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """Cost (mm) of the travels starts[i] -> ends[i], each (k, 2); unknown (NaN) points cost 0."""
+        starts = np.broadcast_to(np.asarray(starts, dtype=float).reshape(-1, 2), np.shape(ends)).reshape(-1, 2)
+        ends = np.asarray(ends, dtype=float).reshape(-1, 2)
+        d = np.hypot(*(ends - starts).T)
+        known = np.isfinite(d)
+        cost = np.where(known, d, 0.0)
+        if self.penalty <= 0 or self.part is None or not known.any():
+            return cost
+        from .combing import segments_inside  # (combing clips with this module: imported when used)
+
+        idx = np.flatnonzero(known & (d > 1e-9))
+        cost[idx] += np.where(segments_inside(starts[idx], ends[idx], self.part), 0.0, self.penalty)
+        return cost
+
+
+def plan_runs(paths: list[np.ndarray], ends: np.ndarray, cost_of, rounds: int = 3) -> list[list[np.ndarray]]:
+    """Share an ordered route among blocks that start and end at given points, with little travel.
+
+    The blocks keep Cura's order, and each must start and end where Cura's
+    did.  Each round cuts the route where the added travel is least
+    (`route_cuts`; a block may get no path: it is then one travel), then
+    re-routes each run from its block's start (or back from its end) when
+    that is shorter; the runs joined are the next round's route.
+
+    Parameters
+    ----------
+    paths : list of ndarray, each (m, 2)
+        The layer's paths in print order, mm.
+    ends : ndarray, shape (b, 4)
+        Per block in print order: start x, y and end x, y (NaN: unknown).
+    cost_of : callable(starts (k, 2), ends (k, 2)) -> ndarray (k,)
+        Cost of straight travels, mm (`TravelCost`).
+
+    Returns
+    -------
+    list of list of ndarray
+        One run of paths per block.
+    """
+    best_runs, best_cost = None, math.inf
+    order = paths
+    routed: dict[tuple, list] = {}  # (block, its run's paths): its routes; a block's run often stays the same
+    for _ in range(rounds):
+        cuts = route_cuts(order, ends, cost_of)
+        # Per block: its run as cut, routed forward from its start, and routed back from its end.
+        options = []
+        for i in range(len(ends)):
+            run = order[cuts[i] : cuts[i + 1]]
+            b = ends[i]
+            options.append([run])
+            if len(run) >= 2:
+                key = (i, *map(id, run))
+                if key not in routed:
+                    forward, _ = order_paths(run, (b[0], b[1]) if math.isfinite(b[0]) else None)
+                    backward, _ = order_paths(run, (b[2], b[3]) if math.isfinite(b[2]) else None)
+                    routed[key] = [forward, [p[::-1] for p in backward[::-1]]]
+                options[-1] += routed[key]
+        flat = [(run, ends[i]) for i, opts in enumerate(options) for run in opts]
+        costs = runs_travel([r for r, _ in flat], [b for _, b in flat], cost_of)
+        runs, total, at = [], 0.0, 0
+        for opts in options:
+            pick = int(np.argmin(costs[at : at + len(opts)] - 1e-6 * (np.arange(len(opts)) == 0)))
+            runs.append(list(opts[pick]))
+            total += float(costs[at + pick])
+            at += len(opts)
+        if total >= best_cost - 1e-6:
+            break
+        best_runs, best_cost = runs, total
+        joined = [p for r in runs for p in r]
+        if len(joined) == len(order) and all(a is b for a, b in zip(joined, order)):
+            break  # the same route again: the next round would cut and cost it the same way
+        order = joined
+    return best_runs
+
+
+def route_cuts(paths: list[np.ndarray], ends: np.ndarray, cost_of) -> np.ndarray:
+    """Where to cut an ordered route into runs for blocks that must start and end at given points.
+
+    Block i (in print order) starts at ``ends[i, :2]`` and must end at
+    ``ends[i, 2:]``; it prints paths ``cuts[i]:cuts[i + 1]`` (possibly none:
+    then it is one travel from its start to its end).  Dynamic programming
+    over the cut positions minimizes the total travel (straight lines), each
+    block's run costing the travel in, the travel between its paths and the
+    travel out; with prefix minima it is O(blocks x paths).
+
+    Parameters
+    ----------
+    paths : list of ndarray, each (m, 2)
+        The route, in order, mm.
+    ends : ndarray, shape (b, 4)
+        Per block: start x, y and end x, y (NaN: unknown, costs nothing).
+    cost_of : callable
+        Cost of straight travels (`TravelCost`).
+
+    Returns
+    -------
+    ndarray of int, shape (b + 1,)
+        ``cuts[0] = 0``, ``cuts[-1] = len(paths)``, non-decreasing.
+    """
+    n, nb = len(paths), len(ends)
+    heads = np.array([p[0] for p in paths], dtype=float).reshape(-1, 2)
+    tails = np.array([p[-1] for p in paths], dtype=float).reshape(-1, 2)
+    # Every travel the programme may choose, costed at once: between paths, into each path from
+    # each block's start, out of each path to each block's end, and each block's own hop.
+    starts = np.concatenate([tails[:-1], np.repeat(ends[:, :2], n, axis=0), np.tile(tails, (nb, 1)), ends[:, :2]])
+    stops = np.concatenate([heads[1:], np.tile(heads, (nb, 1)), np.repeat(ends[:, 2:], n, axis=0), ends[:, 2:]])
+    every = cost_of(starts, stops)
+    gaps, rest = every[: max(n - 1, 0)], every[max(n - 1, 0) :]
+    enter_cost = rest[: nb * n].reshape(nb, n)
+    exit_cost = rest[nb * n : 2 * nb * n].reshape(nb, n)
+    hops = rest[2 * nb * n :]
+    inner = np.r_[0.0, np.cumsum(gaps)]  # inner[k]: travel between paths 0..k
+
+    # f[k]: least travel of the blocks so far when the next block's run starts at path k.
+    f = np.full(n + 1, np.inf)
+    f[0] = 0.0
+    choice = np.zeros((nb, n + 1), dtype=np.int64)
+    stay = np.arange(n + 1)  # choice "no run ends here": the cut stays where it is
+    through = np.full(n + 1, np.inf)  # (through[0] stays inf: a run has a path)
+    run_from = np.zeros(n + 1, dtype=np.int64)
+    for i in range(nb):
+        hop = float(hops[i])
+        # Run k'..k-1: f[k'] + |start -> head k'| - inner[k'] + inner[k-1] + |tail k-1 -> stop|.
+        enter = f[:n] + enter_cost[i] - inner
+        best = np.minimum.accumulate(enter)
+        run_from[1:] = running_argmin(enter, best)
+        through[1:] = best + inner + exit_cost[i]
+        empty = f + hop
+        use_run = through < empty
+        choice[i] = np.where(use_run, run_from, stay)
+        f = np.where(use_run, through, empty)
+    if not np.isfinite(f[n]):
+        return np.r_[0, np.full(nb, n)]
+    cuts = np.zeros(nb + 1, dtype=np.int64)
+    cuts[nb] = n
+    k = n
+    for i in range(nb - 1, -1, -1):
+        k = int(choice[i, k])
+        cuts[i] = k
+    cuts[0] = 0
+    return cuts
+
+
+def runs_travel(runs: list, ends: list, cost_of) -> np.ndarray:
+    """`run_travel` of many (run, ends) pairs with one call of `cost_of`."""
+    # Every run's points in travel order: its start, head and tail of each path, its end; the
+    # travels are the consecutive pairs (each run adds an even count, so pairs never straddle runs).
+    points: list = []
+    travels = np.empty(len(runs), dtype=np.int64)
+    for k, (run, b) in enumerate(zip(runs, ends, strict=True)):
+        points.append(b[:2])
+        for p in run:
+            points.append(p[0])
+            points.append(p[-1])
+        points.append(b[2:])
+        travels[k] = len(run) + 1
+    pts = np.array(points, dtype=float).reshape(-1, 2)
+    costs = cost_of(pts[0::2], pts[1::2])
+    return np.bincount(np.repeat(np.arange(len(runs)), travels), costs, len(runs))
+
+
+def run_travel(run: list[np.ndarray], ends, cost_of) -> float:
+    """Travel cost of a block printing `run`: in from ends[:2], between the paths, out to ends[2:] (mm).
+
+    With no path it is the travel from ends[:2] to ends[2:]; unknown (NaN) ends cost nothing.
+    """
+    pts = [np.asarray(ends[:2], dtype=float)]
+    for p in run:
+        pts += [p[0], p[-1]]
+    pts.append(np.asarray(ends[2:], dtype=float))
+    pts = np.array(pts).reshape(-1, 2, 2)
+    return float(cost_of(pts[:, 0], pts[:, 1]).sum())
+
+
+def running_argmin(values: np.ndarray, best: np.ndarray | None = None) -> np.ndarray:
+    """Index of the minimum of values[:k + 1] for every k (`best`: their running minimum, if known)."""
+    if best is None:
+        best = np.minimum.accumulate(values)
+    is_new = np.empty(len(values), dtype=bool)
+    is_new[:1] = True
+    np.less(values[1:], best[:-1], out=is_new[1:])
+    idx = np.where(is_new, np.arange(len(values)), 0)
+    return np.maximum.accumulate(idx)

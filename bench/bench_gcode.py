@@ -62,7 +62,7 @@ STAGES = (
     ("patterns", "DelaunayInfill.gcode.process", "PatternCache.get"),
     ("clip + route", "DelaunayInfill.gcode.process", "_Run._clip"),
     ("modifier split", "DelaunayInfill.gcode.process", "split_by_line_ends"),
-    ("runs to blocks", "DelaunayInfill.gcode.process", "_plan_runs"),
+    ("runs to blocks", "DelaunayInfill.routing", "plan_runs"),
     ("write G-code", "DelaunayInfill.gcode.process", "emit_block"),
     ("repeated layers", "DelaunayInfill.gcode.process", "_Run._replay"),
 )

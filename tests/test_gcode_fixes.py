@@ -183,7 +183,7 @@ def test_header_time_matches_the_last_time_elapsed(model, star, bracket):
 
 def test_header_volume_figures_follow_the_net_change():
     """Griffin's mm³ figure: Cura's value + net change × filament area (given), else Cura's own ratio."""
-    from DelaunayInfill.gcode.process import patch_header
+    from DelaunayInfill.gcode.header import patch_header
 
     header = ";FLAVOR:Griffin\n;PRINT.TIME:1000\n;EXTRUDER_TRAIN.0.MATERIAL.VOLUME_USED:20000\n;Generated with Cura_SteamEngine 4.13.0\n"
     area = math.pi * 2.85**2 / 4

@@ -301,7 +301,8 @@ def test_route_cuts_are_the_cheapest_split_of_the_route():
     """The dynamic programme that shares a route among Cura's blocks finds the least travel (brute force)."""
     import itertools
 
-    from DelaunayInfill.gcode.process import _route_cuts, _run_travel
+    from DelaunayInfill.routing import route_cuts as _route_cuts
+    from DelaunayInfill.routing import run_travel as _run_travel
 
     rng = np.random.default_rng(3)
     cost = lambda a, b: np.hypot(*(np.asarray(b, float) - np.asarray(a, float)).reshape(-1, 2).T)  # noqa: E731
@@ -393,7 +394,7 @@ def test_a_detour_longer_than_the_combing_limit_retracts(star, star_done):
 
 
 def test_running_argmin_is_where_each_prefix_has_its_first_minimum():
-    from DelaunayInfill.gcode.process import _running_argmin
+    from DelaunayInfill.routing import running_argmin as _running_argmin
 
     rng = np.random.default_rng(5)
     for n in (1, 2, 7, 40):
@@ -404,7 +405,8 @@ def test_running_argmin_is_where_each_prefix_has_its_first_minimum():
 
 
 def test_runs_travel_is_each_runs_travel_at_once():
-    from DelaunayInfill.gcode.process import _run_travel, _runs_travel
+    from DelaunayInfill.routing import run_travel as _run_travel
+    from DelaunayInfill.routing import runs_travel as _runs_travel
 
     rng = np.random.default_rng(6)
     cost = lambda a, b: np.nan_to_num(np.hypot(*(np.asarray(b, float) - np.asarray(a, float)).reshape(-1, 2).T))  # noqa: E731
@@ -417,16 +419,16 @@ def test_runs_travel_is_each_runs_travel_at_once():
 
 def test_plan_runs_stops_when_a_round_gives_back_the_same_route(monkeypatch):
     """A round whose runs join into the route it started from would repeat itself: it is not run again."""
-    import DelaunayInfill.gcode.process as process
+    import DelaunayInfill.routing as routing
 
     paths = [np.array([[x, 0.0], [x, 10.0]]) if k % 2 == 0 else np.array([[x, 10.0], [x, 0.0]])
              for k, x in enumerate(np.arange(6.0))]
     ends = np.array([[0.0, -1.0, 2.0, 11.0], [3.0, 11.0, 5.0, -1.0]])
     cost = lambda a, b: np.hypot(*(np.asarray(b, float) - np.asarray(a, float)).reshape(-1, 2).T)  # noqa: E731
     calls = []
-    real = process._route_cuts
-    monkeypatch.setattr(process, "_route_cuts", lambda *a: calls.append(1) or real(*a))
-    runs = process._plan_runs(list(paths), ends, cost)
+    real = routing.route_cuts
+    monkeypatch.setattr(routing, "route_cuts", lambda *a: calls.append(1) or real(*a))
+    runs = routing.plan_runs(list(paths), ends, cost)
     assert len(calls) == 1
     assert [len(r) for r in runs] == [3, 3]
     assert all(a is b for a, b in zip([p for r in runs for p in r], paths, strict=True))  # the serpentine stays as it is
@@ -435,7 +437,7 @@ def test_plan_runs_stops_when_a_round_gives_back_the_same_route(monkeypatch):
 def test_plan_runs_routes_each_blocks_run_once_and_plans_as_without_memory(monkeypatch):
     """A run a block gets again in a later round is not routed again (routing is deterministic: the
     routes remembered are the ones routing it again would give)."""
-    import DelaunayInfill.gcode.process as process
+    import DelaunayInfill.routing as routing
 
     rng = np.random.default_rng(5)
     starts = rng.uniform(0, 40, (30, 2))
@@ -443,7 +445,7 @@ def test_plan_runs_routes_each_blocks_run_once_and_plans_as_without_memory(monke
     ends = np.array([[0.0, 0.0, 20.0, 0.0], [20.0, 0.0, 40.0, 40.0], [40.0, 40.0, 0.0, 40.0]])
     cost = lambda a, b: np.hypot(*(np.asarray(b, float) - np.asarray(a, float)).reshape(-1, 2).T)  # noqa: E731
     seen, repeated = set(), []
-    real = process.order_paths
+    real = routing.order_paths
 
     def counting(run, start, *args, **kwargs):
         key = (tuple(map(id, run)), None if start is None else tuple(start))
@@ -453,10 +455,10 @@ def test_plan_runs_routes_each_blocks_run_once_and_plans_as_without_memory(monke
         return real(run, start, *args, **kwargs)
 
     rounds = []
-    real_cuts = process._route_cuts
-    monkeypatch.setattr(process, "_route_cuts", lambda *a: rounds.append(1) or real_cuts(*a))
-    monkeypatch.setattr(process, "order_paths", counting)
-    runs = process._plan_runs(list(paths), ends, cost)
+    real_cuts = routing.route_cuts
+    monkeypatch.setattr(routing, "route_cuts", lambda *a: rounds.append(1) or real_cuts(*a))
+    monkeypatch.setattr(routing, "order_paths", counting)
+    runs = routing.plan_runs(list(paths), ends, cost)
     assert len(rounds) >= 2 and repeated == []
     assert sum(len(r) for r in runs) == len(paths)  # every path planned once
 

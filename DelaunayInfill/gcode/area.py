@@ -2,12 +2,16 @@
 
 The G-code carries no infill polygons.  Per mesh and layer:
 
-* the part interior is the even-odd union of the closed WALL-OUTER loops;
+* the part interior is the even-odd union of the WALL-OUTER loops, a loop
+  joined from the pieces Cura prints it in (`wall_rings`);
 * the walls' footprint is every wall line buffered by half a line width;
 * infill area = (interior - walls) grown by the infill overlap, minus the
-  skin lines buffered by half a line width;
-* it is checked against Cura's own FILL lines: where they fall outside it
-  (walls missing, odd geometry) a closed hull of the FILL lines is added.
+  skin: its lines and the space between them (`skin_region`);
+* a mesh without walls (an infill-only mesh) has a closed hull of its FILL
+  lines as its area.
+
+Nothing here trusts Cura's FILL lines to widen an area: where they fall
+outside it, `witness.py` keeps Cura's own lines there.
 """
 
 from __future__ import annotations
@@ -93,11 +97,65 @@ def runs_of(parse: LayerParse, mask: np.ndarray) -> list[np.ndarray]:
     return [np.vstack([pts_start[a:b], pts_end[b - 1 : b]]) for a, b in zip(starts, stops, strict=True)]
 
 
-def _closed_rings(runs: list[np.ndarray], tolerance: float) -> list[np.ndarray]:
-    rings = []
+def wall_rings(runs: list[np.ndarray], tolerance: float) -> list[np.ndarray]:
+    """Closed loops from wall runs, a loop joined from the pieces it was printed in.
+
+    Cura prints some wall loops in pieces with short travels between them (a
+    hole's wall in three pieces, a loop broken where another part's wall
+    meets it).  Runs are chained end to start, nearest end first, while the
+    gap is at most `tolerance`; a chain is a loop when its ends meet within
+    `tolerance`.  Pieces that close no loop are left out.
+
+    Parameters
+    ----------
+    runs : list of ndarray, each shape (m, 2)
+        Polylines of wall moves, mm.
+    tolerance : float
+        Largest gap bridged, mm.
+
+    Returns
+    -------
+    list of ndarray, each shape (m, 2)
+    """
+    rings, pieces = [], []
     for run in runs:
+        if len(run) < 2:
+            continue
         if len(run) >= 3 and np.hypot(*(run[-1] - run[0])) <= tolerance:
             rings.append(run)
+        else:
+            pieces.append(run)
+    if not pieces:
+        return rings
+    heads = np.array([p[0] for p in pieces])
+    tails = np.array([p[-1] for p in pieces])
+    free = np.ones(len(pieces), dtype=bool)
+    for first in range(len(pieces)):
+        if not free[first]:
+            continue
+        free[first] = False
+        chain = [pieces[first]]
+        head, tail = heads[first], tails[first]
+        while free.any():
+            # the nearest free end to the chain's tail: a piece's head (as printed) or its tail (reversed)
+            to_heads = np.where(free, np.hypot(*(heads - tail).T), np.inf)
+            to_tails = np.where(free, np.hypot(*(tails - tail).T), np.inf)
+            k_head, k_tail = int(np.argmin(to_heads)), int(np.argmin(to_tails))
+            if min(to_heads[k_head], to_tails[k_tail]) > tolerance:
+                break
+            if to_heads[k_head] <= to_tails[k_tail]:
+                chain.append(pieces[k_head])
+                tail = tails[k_head]
+                free[k_head] = False
+            else:
+                chain.append(pieces[k_tail][::-1])
+                tail = heads[k_tail]
+                free[k_tail] = False
+            if np.hypot(*(tail - head)) <= tolerance:
+                break
+        joined = np.concatenate(chain)
+        if len(joined) >= 3 and np.hypot(*(tail - head)) <= tolerance:
+            rings.append(joined)
     return rings
 
 
@@ -120,6 +178,27 @@ def _buffer_runs(runs: list[np.ndarray], radius: float):
     if not lines:
         return empty_area()
     return to_multipolygon(multilinestring_of(lines).buffer(radius, 4))
+
+
+def skin_region(runs: list[np.ndarray], line_width: float):
+    """The area skin covers: its lines grown by half a line width, the gaps between them closed.
+
+    Skin lines lie about a line width apart (bridges and some top/bottom
+    patterns a little more), so the space between neighbouring lines is skin
+    too: a closing of one line width joins lines up to two line widths apart.
+
+    Parameters
+    ----------
+    runs : list of ndarray, each shape (m, 2)
+        Polylines of skin moves, mm.
+    line_width : float
+        mm.
+    """
+    reach = line_width
+    grown = _buffer_runs(runs, line_width / 2 + reach)
+    if grown.is_empty:
+        return grown
+    return to_multipolygon(grown.buffer(-reach, 4))
 
 
 def sample_segments(segments: np.ndarray, step: float) -> np.ndarray:
@@ -295,24 +374,20 @@ def mesh_layer(
     part = None
     area = empty_area()
     if has_walls:
-        outer_runs = runs_of(parse, outer_mask)
-        rings = _closed_rings(outer_runs, 2.0 * line_width)
+        rings = wall_rings(runs_of(parse, outer_mask), 2.0 * line_width)
         if rings:
             part = _even_odd(rings)
             walls = _buffer_runs(runs_of(parse, wall_mask), line_width / 2 + _EPS)
             inner = part.difference(walls)
             area = to_multipolygon(inner.buffer(overlap, 4)) if overlap > 0 else to_multipolygon(inner)
     if skin_mask.any() and not area.is_empty:
-        skin = _buffer_runs(runs_of(parse, skin_mask), line_width / 2 + _EPS)
-        area = to_multipolygon(area.difference(skin))
+        area = to_multipolygon(area.difference(skin_region(runs_of(parse, skin_mask), line_width)))
     area = to_multipolygon(unary_union([p for p in polygons_of(area) if p.area > line_width * line_width]))
 
     used_hull = False
-    if len(fill) and (has_walls or hull_without_walls) and fraction_inside(fill, area, line_width) < 0.95:
-        hull = fill_hull(runs_of(parse, fill_mask), line_width, fill_reach)
-        if part is not None:
-            hull = to_multipolygon(hull.intersection(part.buffer(line_width / 2)))
-        area = to_multipolygon(unary_union([area, hull]))
+    if len(fill) and not has_walls and hull_without_walls:
+        # An infill-only mesh: its FILL lines are all there is to go by.
+        area = fill_hull(runs_of(parse, fill_mask), line_width, fill_reach)
         used_hull = True
     if cache is not None and key is not None:
         cache.put(key, (part, area, used_hull))

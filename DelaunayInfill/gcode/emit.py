@@ -20,6 +20,9 @@ from .read import MachineState, RetractionModel
 __all__ = ["EmitParams", "EmitResult", "emit_block", "fmt"]
 
 
+_E_QUANTUM = 5e-6  # half the last digit of an E word (5 decimals): a smaller E move prints as none
+
+
 def fmt(value: float, decimals: int) -> str:
     """A number the way Cura writes it (no trailing zeros)."""
     text = f"{value:.{decimals}f}"
@@ -259,7 +262,7 @@ class _Writer:
                 self.out.retractions += 1
             return
         amount = self.r.amount if amount is None else amount
-        if amount <= 0:
+        if amount < _E_QUANTUM:  # below the E word's last digit: the move would change nothing
             return
         lines.append(f"G1 {self.set_feed(self.r.retract_f or self.f)}E{self._e_word(-amount)}")
         self.depth += amount
@@ -272,7 +275,7 @@ class _Writer:
             lines.append("G11")
             self.fw = False
         amount = self.depth if amount is None else amount
-        if amount <= 1e-9:
+        if amount < _E_QUANTUM:
             return
         lines.append(f"G1 {self.set_feed(self.r.prime_f or self.r.retract_f or self.f)}E{self._e_word(amount)}")
         self.depth = max(0.0, self.depth - amount)
@@ -465,9 +468,9 @@ def emit_block(
     elif w.fw and not after.fw_retracted:
         result.lines.append("G11")
         w.fw = False
-    if after.depth > w.depth + 1e-7:
+    if after.depth > w.depth + _E_QUANTUM:
         w.retract(after.depth - w.depth)
-    elif after.depth < w.depth - 1e-7:
+    elif after.depth < w.depth - _E_QUANTUM:
         w.prime(w.depth - after.depth)
     if going_up:
         w.move_z(after.z)

@@ -8,7 +8,7 @@ from scipy.spatial import cKDTree
 from .area import direction_peaks, median_of, runs_of, sample_segments
 from .read import WALL_INNER, WALL_OUTER, LayerParse
 
-__all__ = ["wall_line_width", "infill_density", "e_per_mm", "nearest_sample_distance"]
+__all__ = ["wall_line_width", "infill_density", "family_spacings", "e_per_mm", "nearest_sample_distance"]
 
 
 def _segments_of(runs: list[np.ndarray]) -> np.ndarray:
@@ -96,12 +96,51 @@ def e_per_mm(parse: LayerParse, mask: np.ndarray) -> float | None:
     return float(de[ok].sum() / length[ok].sum())
 
 
+def family_spacings(fill: np.ndarray, line_width: float) -> list[float] | None:
+    """Spacing of each family of parallel lines in Cura's FILL, mm; None when the lines form no clear families.
+
+    Line patterns (lines, grid, triangles, cubic, ...) print one to four
+    families of parallel lines; gyroid, concentric and lightning do not.
+
+    Parameters
+    ----------
+    fill : ndarray, shape (k, 2, 2)
+        FILL segments, mm.
+    line_width : float
+        mm.
+    """
+    if len(fill) < 4:
+        return None
+    length, ang, families, total = direction_peaks(fill, 0.12)
+    members = []
+    for fam in families:
+        delta = np.abs(np.mod(ang - 2.0 * fam + 90.0, 180.0) - 90.0)
+        members.append(delta <= 3.5)
+    covered = length[np.any(members, axis=0)].sum() / total if members and total > 0 else 0.0
+    if not (covered > 0.85 and 1 <= len(families) <= 4):
+        return None
+    spacings = []
+    for sel in members:
+        weight = length[sel]
+        theta = np.radians((ang[sel] * weight).sum() / weight.sum())  # np.average, without its overhead
+        normal = np.array([-np.sin(theta), np.cos(theta)])
+        mid = 0.5 * (fill[sel, 0] + fill[sel, 1])
+        off = np.sort(np.round(mid @ normal, 2))
+        off = off[np.concatenate(([True], off[1:] != off[:-1]))]  # np.unique
+        gaps = np.diff(off)
+        gaps = gaps[gaps > 0.5 * line_width]
+        if gaps.size < 2:
+            return None
+        spacings.append(median_of(gaps))
+    return spacings
+
+
 def infill_density(fill: np.ndarray, line_width: float, area: float | None = None) -> float | None:
     """Cura's infill density from its FILL lines (fraction).
 
-    Line patterns (lines, grid, triangles, ...) print families of parallel
-    lines; a family with spacing s adds ``line_width / s`` to the density.
-    When no clear families exist, ``length * line_width / area`` is used.
+    A family of parallel lines with spacing s adds ``line_width / s`` to the
+    density (`family_spacings`).  When no clear families exist,
+    ``length * line_width / area`` is used.
 
     Parameters
     ----------
@@ -113,31 +152,12 @@ def infill_density(fill: np.ndarray, line_width: float, area: float | None = Non
     """
     if len(fill) < 4:
         return None
-    length, ang, families, total = direction_peaks(fill, 0.12)
-    density = 0.0
-    members = []
-    for fam in families:
-        delta = np.abs(np.mod(ang - 2.0 * fam + 90.0, 180.0) - 90.0)
-        members.append(delta <= 3.5)
-    covered = length[np.any(members, axis=0)].sum() / total if members and total > 0 else 0.0
-    ok = covered > 0.85 and 1 <= len(families) <= 4
-    if ok:
-        for sel in members:
-            weight = length[sel]
-            theta = np.radians((ang[sel] * weight).sum() / weight.sum())  # np.average, without its overhead
-            normal = np.array([-np.sin(theta), np.cos(theta)])
-            mid = 0.5 * (fill[sel, 0] + fill[sel, 1])
-            off = np.sort(np.round(mid @ normal, 2))
-            off = off[np.concatenate(([True], off[1:] != off[:-1]))]  # np.unique
-            gaps = np.diff(off)
-            gaps = gaps[gaps > 0.5 * line_width]
-            if gaps.size < 2:
-                ok = False
-                break
-            spacing = median_of(gaps)
-            density += line_width / spacing
-    if ok and 0.0 < density <= 1.0:
-        return float(density)
+    spacings = family_spacings(fill, line_width)
+    if spacings is not None:
+        density = sum(line_width / s for s in spacings)
+        if 0.0 < density <= 1.0:
+            return float(density)
     if area and area > 0:
-        return float(min(1.0, length.sum() * line_width / area))
+        d = fill[:, 1] - fill[:, 0]
+        return float(min(1.0, np.hypot(d[:, 0], d[:, 1]).sum() * line_width / area))
     return None

@@ -15,21 +15,22 @@ import shutil
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..combing import CombingArea, segments_inside
+from ..combing import CombingArea
 from ..geometry import contains_xy, empty_area, polygons_of, to_multipolygon, unary_union
-from ..routing import order_paths
-from .area import AreaCache, fraction_inside, mesh_layer, sample_segments, segments_of
+from ..routing import TravelCost, plan_runs
+from .area import AreaCache, fraction_inside, mesh_layer, runs_of, sample_segments, segments_of
 from .emit import EmitParams, emit_block
 from .estimate import move_seconds, move_times
-from .infer import e_per_mm, infill_density, wall_line_width
+from .footer import read_footer
+from .header import patch_header
+from .infer import e_per_mm, family_spacings, infill_density, wall_line_width
 from .read import (
     FILL,
-    MARKER,
     WALL_INNER,
     WALL_OUTER,
     GCodeError,
@@ -55,6 +56,7 @@ from .replay import (
 )
 from .settings import MeshSettings, ProcessReport, ProcessSettings, Region, RegionReport
 from .split import split_by_line_ends
+from .witness import kept_cura_pieces, witness_radius, witnessed
 
 __all__ = [
     "process_gcode",
@@ -74,7 +76,8 @@ _RETRACT_TRAVEL_MM = 40.0  # a retraction and prime take about as long as this m
 _NEGLIGIBLE_AREA = 1e-9  # share of an area below which what is left of it is rounding, not a zone
 # the report's counters that a repeated layer adds to again (`_Run._totals`)
 _COUNTED = ("layers_total", "layers_processed", "layers_kept", "infill_before_mm", "infill_after_mm",
-            "infill_travel_mm", "infill_retractions", "blocks_replaced", "blocks_kept")
+            "infill_travel_mm", "infill_retractions", "blocks_replaced", "blocks_kept", "cura_infill_kept_mm",
+            "layers_with_cura_infill_kept")
 
 
 # ----------------------------------------------------------------------------- survey
@@ -336,6 +339,7 @@ class _Run:
         self.layer_densities: dict[tuple, tuple] = {}  # this layer's `infill_density` answers
         self.grown: dict[tuple, tuple] = {}
         self.inside_memo: dict[tuple, tuple] = {}
+        self.witnessed_memo: dict[tuple, tuple] = {}
         self.xy_words: dict[int, tuple] = {}
         self._combing: dict[int, CombingArea] = {}  # id(part) -> its combing area (parts repeat on prisms)
         self.e_before: dict[int, float] = {}
@@ -344,6 +348,16 @@ class _Run:
         self.acceleration = survey.acceleration or settings.acceleration
         self.prev_z: float | None = None
         self.repeats = RepeatCache() if settings.repeat_layers else None
+        self.footer = read_footer(survey.last_chunk)
+        self.mesh_extruder: dict[str, int] = {}
+        # Lightning infill shows only where it supports a top skin, not where infill may go: no witness
+        # confirms the area, so Cura's infill stays.
+        self.keep_cura = (settings.density is None and any(
+            self.footer.infill_pattern(e) == "lightning" for e in range(max(1, len(self.footer.extruder_values)))))
+        if self.keep_cura:
+            self.report.warnings.append(
+                "Cura's lightning infill kept: its lines do not show where infill may go. Choose another infill "
+                "pattern (grid) in Cura to have it replaced, or give --density to replace it anyway")
         self.lw_warned = False
         self.any_lw: float | None = None
 
@@ -436,7 +450,7 @@ class _Run:
         edits: list = []
         if parse.number is not None:
             self.report.layers_total += 1
-            todo = [b for b in parse.blocks if b.has_moves and self.s.enabled(b.mesh)]
+            todo = [b for b in parse.blocks if b.has_moves and self.s.enabled(b.mesh)] if not self.keep_cura else []
             if not todo:
                 self.report.layers_kept += 1
             else:
@@ -569,6 +583,9 @@ class _Run:
             return ms.density
         if self.s.density is not None:
             return self.s.density
+        footer = self._footer_density(mesh, fill, lw)
+        if footer is not None:
+            return footer
         d = self.mesh_density.get(mesh)
         if d is None:
             d = self._infill_density(fill, lw, area.area if area is not None else None)
@@ -576,7 +593,28 @@ class _Run:
                 return 0.2
             if len(fill) >= 12:
                 self.mesh_density[mesh] = d
+        elif len(fill) >= 12:
+            # Cura made this mesh's infill denser from here on (gradual infill's steps under a top
+            # surface): never print less than it does.
+            here = self._infill_density(fill, lw)
+            if here is not None and here > 1.25 * d and family_spacings(fill, lw) is not None:
+                d = self.mesh_density[mesh] = here
         return d
+
+    def _footer_density(self, mesh: str, fill: np.ndarray, lw: float) -> float | None:
+        """Cura's ``infill_sparse_density`` from the file's settings footer, for a mesh whose lines agree.
+
+        The footer holds the print's settings, not per-model ones: a mesh whose
+        lines form clear families at another density (more than a quarter off)
+        has a per-model density of its own, which its lines tell.
+        """
+        wanted = self.footer.infill_density(self.mesh_extruder.get(mesh, 0))
+        if wanted is None or wanted <= 0.0:
+            return None
+        spacings = family_spacings(fill, lw) if len(fill) >= 12 else None
+        if spacings is not None and abs(sum(lw / sp for sp in spacings) - wanted) > 0.25 * wanted:
+            return None
+        return wanted
 
     def _region_mesh_density(self, mesh: str, fill: np.ndarray, lw: float, area) -> float:
         ms = self.s.mesh(mesh)
@@ -626,6 +664,7 @@ class _Run:
         for b in blocks:
             if b.has_moves and b.mesh not in fill_meshes:
                 fill_meshes.append(b.mesh)
+                self.mesh_extruder.setdefault(b.mesh, b.extruder)
         geo = {}
         lw_of = {}
         overlap_of = {}
@@ -675,15 +714,18 @@ class _Run:
 
         z_slice = self._slice_z(parse.z)
         replaced: dict[int, list[str]] = {}
-        stats = {"blocks_replaced": 0, "blocks_kept": 0, "infill_travel_mm": 0.0, "infill_retractions": 0}
+        stats = {"blocks_replaced": 0, "blocks_kept": 0, "infill_travel_mm": 0.0, "infill_retractions": 0,
+                 "cura_infill_kept_mm": 0.0, "layers_with_cura_infill_kept": 0}
         dt = 0.0
         retraction = self._retraction()
         old_times = None  # seconds of each of Cura's moves (computed at the first replaced block)
         layer_epm: dict = {}  # E per mm of a mesh's FILL (key: its name) and of all FILL (key: None)
         for name in normal:
-            g = geo[name]
             lw = lw_of[name]
             children = [c for c, p in parent_of.items() if p == name]
+            if not geo[name].used_hull:  # (a hull is made of the lines: witnessed already)
+                geo[name] = self._witnessed(parse, geo[name], [geo[c] for c in children], lw)
+            g = geo[name]
             area = g.area
             region_list = []
             for k, r in enumerate(self.user_regions):
@@ -703,6 +745,9 @@ class _Run:
                     continue  # the caller gave this modifier's exact mesh as a Region: keep that one only
                 region_list.append((ca, self._region_mesh_density(c, geo[c].fill, lw_of[c], ca), f"mesh {c}"))
             if area.is_empty:
+                if len(g.fill):  # nothing confirmed: Cura's infill of this mesh stays, and is counted
+                    stats["cura_infill_kept_mm"] += float(np.hypot(*(g.fill[:, 1] - g.fill[:, 0]).T).sum())
+                    stats["layers_with_cura_infill_kept"] = 1
                 continue
             density = self._density_of(name, g.fill, lw, area)
             if density <= 0.0:
@@ -725,6 +770,15 @@ class _Run:
                 result = self._clip(pattern, self._line_area(area, lw, overlap_of[name]), start)
                 paths = self._paths(result, min_length=lw / 2)
                 self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
+            # Cura's lines where the new infill does not take over (a part not confirmed, an island too
+            # small for the pattern) are printed as Cura printed them.
+            reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
+            cura_fill = np.concatenate([g.fill, *(geo[c].fill for c in children)])
+            kept = kept_cura_pieces(cura_fill, area, paths, lw, reach, empty)
+            if kept:
+                paths = [*paths, *kept]
+                stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))
+                stats["layers_with_cura_infill_kept"] = 1
             for part, zname in empty_parts:
                 self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
             travel_part = g.part if g.part is not None else area.buffer(lw / 2)
@@ -733,13 +787,12 @@ class _Run:
                 assigned[fill_blocks[0]] = list(paths)
             elif paths:
                 # The host's and its modifiers' FILL blocks share the layer's route in runs of
-                # consecutive paths, cut where the least travel is added (`_plan_runs`): the route
+                # consecutive paths, cut where the least travel is added (`plan_runs`): the route
                 # keeps its order, Cura's blocks keep theirs.  A travel that leaves the part is
                 # retracted (when Cura retracts): it costs about as much as this much more travel.
                 penalty = _RETRACT_TRAVEL_MM if retraction.seen else 0.0
                 self._share_paths(paths, fill_blocks, blocks, travel_part, penalty, assigned)
             # A block that got no new path keeps Cura's infill only where the new pattern leaves a gap.
-            reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
             new_tree = None
             for bi in my_blocks:
                 blk = blocks[bi]
@@ -820,7 +873,7 @@ class _Run:
                 stats["infill_travel_mm"] += out.travel_mm
                 stats["infill_retractions"] += out.retractions
         if not replaced:
-            return None, 0.0, {"blocks_kept": stats["blocks_kept"]}
+            return None, 0.0, {k: stats[k] for k in ("blocks_kept", "cura_infill_kept_mm", "layers_with_cura_infill_kept")}
         if not math.isfinite(dt):
             raise ValueError("the print-time estimate of the new moves is not finite")
         order = sorted(replaced, key=lambda i: blocks[i].start)
@@ -834,8 +887,38 @@ class _Run:
             time_lines = _time_lines(out_lines)
         return (out_lines, time_lines, edits), dt, stats
 
+    def _witnessed(self, parse: LayerParse, g, children: list, lw: float):
+        """`g` with its area cut to what Cura's FILL lines of it and its modifiers confirm (remembered)."""
+        fills = [g.fill, *(c.fill for c in children)]
+        h = hashlib.blake2b(digest_size=16)
+        for f in fills:
+            h.update(np.round(f, 3).tobytes() + b"|")
+        key = (id(g.area), h.digest(), round(lw, 4))
+        hit = self.witnessed_memo.get(key)
+        if hit is not None and hit[0] is g.area:
+            return hit[1]
+        spacing = None
+        for f in fills:
+            if len(f) == 0:
+                continue
+            found = family_spacings(f, lw)
+            if found is None:
+                # no families of parallel lines (gyroid, concentric, ...): the spacing their length gives
+                d = self._infill_density(f, lw, g.area.area) if not g.area.is_empty else None
+                found = [lw / d] if d else None
+            if found:
+                spacing = max(spacing or 0.0, *found)
+        mask = parse.extruding() & parse.kind_mask(FILL)
+        runs = runs_of(parse, mask & np.isin(parse.moves["mesh"], [parse.meshes.index(m) for m in (g.mesh, *(c.mesh for c in children))]))
+        area = witnessed(g.area, runs, lw, witness_radius(spacing, lw))
+        out = replace(g, area=area)
+        if len(self.witnessed_memo) >= 32:
+            self.witnessed_memo.pop(next(iter(self.witnessed_memo)))
+        self.witnessed_memo[key] = (g.area, out)
+        return out
+
     def _share_paths(self, paths, fill_blocks: list[int], blocks, part, penalty: float, assigned: dict) -> None:
-        """Cut the layer's route into one run of consecutive paths per Cura FILL block (`_plan_runs`).
+        """Cut the layer's route into one run of consecutive paths per Cura FILL block (`plan_runs`).
 
         Remembered per clip result (a prism's layers share their paths and blocks).
         """
@@ -843,8 +926,8 @@ class _Run:
         key = (id(paths), id(part), penalty, tuple(fill_blocks), tuple(round(v, 2) for e in ends for v in e))
         hit = self.shares.get(key)
         if hit is None or hit[0] is not paths or hit[1] is not part:
-            cost = _TravelCost(part, penalty)
-            hit = (paths, part, _plan_runs(list(paths), np.array(ends, dtype=float), cost))
+            cost = TravelCost(part, penalty)
+            hit = (paths, part, plan_runs(list(paths), np.array(ends, dtype=float), cost))
             if len(self.shares) >= 16:
                 self.shares.pop(next(iter(self.shares)))
             self.shares[key] = hit
@@ -1108,305 +1191,8 @@ def _block_rate(parse: LayerParse, moves: np.ndarray, mesh: str, fill: np.ndarra
     return own_e / own_length
 
 
-class _TravelCost:
-    """Cost of straight travels: their length, plus `penalty` mm for each that leaves `part`."""
-
-    def __init__(self, part, penalty: float):
-        self.part = part
-        self.penalty = penalty
-
-    def __call__(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
-        """Cost (mm) of the travels starts[i] -> ends[i], each (k, 2); unknown (NaN) points cost 0."""
-        starts = np.broadcast_to(np.asarray(starts, dtype=float).reshape(-1, 2), np.shape(ends)).reshape(-1, 2)
-        ends = np.asarray(ends, dtype=float).reshape(-1, 2)
-        d = np.hypot(*(ends - starts).T)
-        known = np.isfinite(d)
-        cost = np.where(known, d, 0.0)
-        if self.penalty <= 0 or self.part is None or not known.any():
-            return cost
-        idx = np.flatnonzero(known & (d > 1e-9))
-        cost[idx] += np.where(segments_inside(starts[idx], ends[idx], self.part), 0.0, self.penalty)
-        return cost
-
-
-def _plan_runs(paths: list[np.ndarray], ends: np.ndarray, cost_of, rounds: int = 3) -> list[list[np.ndarray]]:
-    """Share an ordered route among blocks that start and end at given points, with little travel.
-
-    The blocks keep Cura's order, and each must start and end where Cura's
-    did.  Each round cuts the route where the added travel is least
-    (`_route_cuts`; a block may get no path: it is then one travel), then
-    re-routes each run from its block's start (or back from its end) when
-    that is shorter; the runs joined are the next round's route.
-
-    Parameters
-    ----------
-    paths : list of ndarray, each (m, 2)
-        The layer's paths in print order, mm.
-    ends : ndarray, shape (b, 4)
-        Per block in print order: start x, y and end x, y (NaN: unknown).
-    cost_of : callable(starts (k, 2), ends (k, 2)) -> ndarray (k,)
-        Cost of straight travels, mm (`_TravelCost`).
-
-    Returns
-    -------
-    list of list of ndarray
-        One run of paths per block.
-    """
-    best_runs, best_cost = None, math.inf
-    order = paths
-    routed: dict[tuple, list] = {}  # (block, its run's paths): its routes; a block's run often stays the same
-    for _ in range(rounds):
-        cuts = _route_cuts(order, ends, cost_of)
-        # Per block: its run as cut, routed forward from its start, and routed back from its end.
-        options = []
-        for i in range(len(ends)):
-            run = order[cuts[i] : cuts[i + 1]]
-            b = ends[i]
-            options.append([run])
-            if len(run) >= 2:
-                key = (i, *map(id, run))
-                if key not in routed:
-                    forward, _ = order_paths(run, (b[0], b[1]) if math.isfinite(b[0]) else None)
-                    backward, _ = order_paths(run, (b[2], b[3]) if math.isfinite(b[2]) else None)
-                    routed[key] = [forward, [p[::-1] for p in backward[::-1]]]
-                options[-1] += routed[key]
-        flat = [(run, ends[i]) for i, opts in enumerate(options) for run in opts]
-        costs = _runs_travel([r for r, _ in flat], [b for _, b in flat], cost_of)
-        runs, total, at = [], 0.0, 0
-        for opts in options:
-            pick = int(np.argmin(costs[at : at + len(opts)] - 1e-6 * (np.arange(len(opts)) == 0)))
-            runs.append(list(opts[pick]))
-            total += float(costs[at + pick])
-            at += len(opts)
-        if total >= best_cost - 1e-6:
-            break
-        best_runs, best_cost = runs, total
-        joined = [p for r in runs for p in r]
-        if len(joined) == len(order) and all(a is b for a, b in zip(joined, order)):
-            break  # the same route again: the next round would cut and cost it the same way
-        order = joined
-    return best_runs
-
-
-def _route_cuts(paths: list[np.ndarray], ends: np.ndarray, cost_of) -> np.ndarray:
-    """Where to cut an ordered route into runs for blocks that must start and end at given points.
-
-    Block i (in print order) starts at ``ends[i, :2]`` and must end at
-    ``ends[i, 2:]``; it prints paths ``cuts[i]:cuts[i + 1]`` (possibly none:
-    then it is one travel from its start to its end).  Dynamic programming
-    over the cut positions minimizes the total travel (straight lines), each
-    block's run costing the travel in, the travel between its paths and the
-    travel out; with prefix minima it is O(blocks x paths).
-
-    Parameters
-    ----------
-    paths : list of ndarray, each (m, 2)
-        The route, in order, mm.
-    ends : ndarray, shape (b, 4)
-        Per block: start x, y and end x, y (NaN: unknown, costs nothing).
-    cost_of : callable
-        Cost of straight travels (`_TravelCost`).
-
-    Returns
-    -------
-    ndarray of int, shape (b + 1,)
-        ``cuts[0] = 0``, ``cuts[-1] = len(paths)``, non-decreasing.
-    """
-    n, nb = len(paths), len(ends)
-    heads = np.array([p[0] for p in paths], dtype=float).reshape(-1, 2)
-    tails = np.array([p[-1] for p in paths], dtype=float).reshape(-1, 2)
-    # Every travel the programme may choose, costed at once: between paths, into each path from
-    # each block's start, out of each path to each block's end, and each block's own hop.
-    starts = np.concatenate([tails[:-1], np.repeat(ends[:, :2], n, axis=0), np.tile(tails, (nb, 1)), ends[:, :2]])
-    stops = np.concatenate([heads[1:], np.tile(heads, (nb, 1)), np.repeat(ends[:, 2:], n, axis=0), ends[:, 2:]])
-    every = cost_of(starts, stops)
-    gaps, rest = every[: max(n - 1, 0)], every[max(n - 1, 0) :]
-    enter_cost = rest[: nb * n].reshape(nb, n)
-    exit_cost = rest[nb * n : 2 * nb * n].reshape(nb, n)
-    hops = rest[2 * nb * n :]
-    inner = np.r_[0.0, np.cumsum(gaps)]  # inner[k]: travel between paths 0..k
-
-    # f[k]: least travel of the blocks so far when the next block's run starts at path k.
-    f = np.full(n + 1, np.inf)
-    f[0] = 0.0
-    choice = np.zeros((nb, n + 1), dtype=np.int64)
-    stay = np.arange(n + 1)  # choice "no run ends here": the cut stays where it is
-    through = np.full(n + 1, np.inf)  # (through[0] stays inf: a run has a path)
-    run_from = np.zeros(n + 1, dtype=np.int64)
-    for i in range(nb):
-        hop = float(hops[i])
-        # Run k'..k-1: f[k'] + |start -> head k'| - inner[k'] + inner[k-1] + |tail k-1 -> stop|.
-        enter = f[:n] + enter_cost[i] - inner
-        best = np.minimum.accumulate(enter)
-        run_from[1:] = _running_argmin(enter, best)
-        through[1:] = best + inner + exit_cost[i]
-        empty = f + hop
-        use_run = through < empty
-        choice[i] = np.where(use_run, run_from, stay)
-        f = np.where(use_run, through, empty)
-    if not np.isfinite(f[n]):
-        return np.r_[0, np.full(nb, n)]
-    cuts = np.zeros(nb + 1, dtype=np.int64)
-    cuts[nb] = n
-    k = n
-    for i in range(nb - 1, -1, -1):
-        k = int(choice[i, k])
-        cuts[i] = k
-    cuts[0] = 0
-    return cuts
-
-
-def _runs_travel(runs: list, ends: list, cost_of) -> np.ndarray:
-    """`_run_travel` of many (run, ends) pairs with one call of `cost_of`."""
-    # Every run's points in travel order: its start, head and tail of each path, its end; the
-    # travels are the consecutive pairs (each run adds an even count, so pairs never straddle runs).
-    points: list = []
-    travels = np.empty(len(runs), dtype=np.int64)
-    for k, (run, b) in enumerate(zip(runs, ends, strict=True)):
-        points.append(b[:2])
-        for p in run:
-            points.append(p[0])
-            points.append(p[-1])
-        points.append(b[2:])
-        travels[k] = len(run) + 1
-    pts = np.array(points, dtype=float).reshape(-1, 2)
-    costs = cost_of(pts[0::2], pts[1::2])
-    return np.bincount(np.repeat(np.arange(len(runs)), travels), costs, len(runs))
-
-
-def _run_travel(run: list[np.ndarray], ends, cost_of) -> float:
-    """Travel cost of a block printing `run`: in from ends[:2], between the paths, out to ends[2:] (mm).
-
-    With no path it is the travel from ends[:2] to ends[2:]; unknown (NaN) ends cost nothing.
-    """
-    pts = [np.asarray(ends[:2], dtype=float)]
-    for p in run:
-        pts += [p[0], p[-1]]
-    pts.append(np.asarray(ends[2:], dtype=float))
-    pts = np.array(pts).reshape(-1, 2, 2)
-    return float(cost_of(pts[:, 0], pts[:, 1]).sum())
-
-
-def _running_argmin(values: np.ndarray, best: np.ndarray | None = None) -> np.ndarray:
-    """Index of the minimum of values[:k + 1] for every k (`best`: their running minimum, if known)."""
-    if best is None:
-        best = np.minimum.accumulate(values)
-    is_new = np.empty(len(values), dtype=bool)
-    is_new[:1] = True
-    np.less(values[1:], best[:-1], out=is_new[1:])
-    idx = np.where(is_new, np.arange(len(values)), 0)
-    return np.maximum.accumulate(idx)
-
-
 def _time_lines(lines: list[str]) -> list[int]:
     return [i for i, line in enumerate(lines) if line.startswith(";TIME_ELAPSED:")]
-
-
-def _filament_area(settings: ProcessSettings) -> float | None:
-    """Cross-section of the filament, mm², when its diameter is known."""
-    d = settings.filament_diameter
-    return math.pi * d * d / 4.0 if d else None
-
-
-def _add_delta(value: float, ext: int, e_net: dict, e_delta: dict, per_e: float | None) -> float:
-    """A header figure plus the net change of extrusion of extruder `ext`.
-
-    `per_e` converts E units to the figure's unit; None: the figure's own ratio
-    to the file's net E (Cura's conversion, read back from its numbers).
-    """
-    delta = e_delta.get(ext, 0.0)
-    if per_e is None:
-        net = e_net.get(ext, 0.0)
-        if net <= 0:
-            return value
-        per_e = value / net
-    return value + delta * per_e
-
-
-def patch_header(
-    header: str,
-    time_delta: float,
-    e_net: dict,
-    e_delta: dict,
-    settings: ProcessSettings,
-    volumetric: bool = False,
-) -> str:
-    """Header with updated time and filament figures and the processed marker.
-
-    Parameters
-    ----------
-    header : str
-        Cura's header chunk.
-    time_delta : float
-        s added to the print time.
-    e_net, e_delta : dict[int, float]
-        Per extruder: the input's net E and the net change made (E units:
-        mm of filament, mm³ when `volumetric`).
-    settings : ProcessSettings
-        For the filament diameter and the marker.
-    volumetric : bool
-        E is mm³ (UltiGCode, RepRap volumetric).
-
-    Notes
-    -----
-    Each figure becomes Cura's figure plus the net change in extrusion (new
-    minus old), so it stays consistent with the file's net E: metres of
-    filament get delta / 1000 (non-volumetric), mm³ get delta (volumetric) or
-    delta × filament area; without a known conversion the figure's own ratio
-    to the file's net E is used.
-    """
-    area = _filament_area(settings)
-    to_m = None if volumetric else 1e-3
-    if volumetric and area:
-        to_m = 1e-3 / area
-    to_mm3 = 1.0 if volumetric else area
-
-    def time_sub(mo):
-        return f"{mo.group(1)}{max(0, int(round(float(mo.group(2)) + time_delta)))}"
-
-    header = re.sub(r"^(;TIME:)(\d+(?:\.\d+)?)", time_sub, header, count=1, flags=re.M)
-    header = re.sub(r"^(;PRINT\.TIME:)(\d+(?:\.\d+)?)", time_sub, header, count=1, flags=re.M)
-
-    def filament_sub(mo):
-        items = mo.group(2).split(",")
-        out = []
-        for ext, item in enumerate(items):
-            im = re.match(r"\s*(-?[\d.]+)(\D*)$", item)
-            if not im:
-                out.append(item)
-                continue
-            per_e = to_m if im.group(2).strip() == "m" else None
-            val = max(0.0, _add_delta(float(im.group(1)), ext, e_net, e_delta, per_e))
-            lead = item[: len(item) - len(item.lstrip())]
-            out.append(f"{lead}{val:.5g}{im.group(2)}")
-        return mo.group(1) + ",".join(out)
-
-    header = re.sub(r"^(;Filament used:)(.*)$", filament_sub, header, count=1, flags=re.M)
-
-    def volume_sub(mo):
-        ext = int(mo.group(2))
-        val = max(0.0, _add_delta(float(mo.group(4)), ext, e_net, e_delta, to_mm3))
-        return f"{mo.group(1)}{ext}{mo.group(3)}{val:.0f}"
-
-    header = re.sub(r"^(;EXTRUDER_TRAIN\.)(\d+)(\.MATERIAL\.VOLUME_USED:)([\d.]+)", volume_sub, header, flags=re.M)
-
-    def ulti_sub(mo):  # UltiGCode: ;MATERIAL: (extruder 0) and ;MATERIAL2: (extruder 1), mm³
-        ext = 1 if mo.group(2) else 0
-        return f"{mo.group(1)}{max(0.0, _add_delta(float(mo.group(3)), ext, e_net, e_delta, to_mm3)):.0f}"
-
-    header = re.sub(r"^(;MATERIAL(2?):)([\d.]+)", ulti_sub, header, flags=re.M)
-    from .. import __version__
-
-    marker = (
-        f"{MARKER} version={__version__} layout={settings.layout} seed={settings.seed}"
-        + (f" density={settings.density * 100:g}%" if settings.density is not None else "")
-    )
-    m = re.search(r"^;Generated with", header, re.M)
-    if m:
-        return header[: m.start()] + marker + "\n" + header[m.start() :]
-    if header and not header.endswith("\n"):
-        header += "\n"
-    return header + marker + "\n"
 
 
 def _umask() -> int:

@@ -204,6 +204,9 @@ class ProcessReport:
     infill_retractions: int = 0
     blocks_replaced: int = 0
     blocks_kept: int = 0
+    # Cura's own lines printed where the new infill does not take over (`witness.kept_cura_pieces`)
+    cura_infill_kept_mm: float = 0.0
+    layers_with_cura_infill_kept: int = 0
     already_processed: bool = False
     volumetric: bool = False
     seconds: float = 0.0
@@ -235,6 +238,9 @@ class ProcessReport:
             ("infill path (mm)", f"{self.infill_before_mm:.0f}", f"{self.infill_after_mm:.0f}", pct(self.infill_after_mm, self.infill_before_mm)),
             ("infill travel (mm)", "", f"{self.infill_travel_mm:.0f}", f"{self.infill_retractions} retractions"),
         ]
+        if self.cura_infill_kept_mm > 0:
+            rows.append(("  Cura's lines kept", "", f"{self.cura_infill_kept_mm:.0f} mm",
+                         f"in {self.layers_with_cura_infill_kept} layers"))
         out = [f"{'':20s} {'before':>12s} {'after':>16s} {'change':>24s}"]
         out += [f"{a:20s} {b:>12s} {c:>16s} {d:>24s}" for a, b, c, d in rows]
         if self.regions:

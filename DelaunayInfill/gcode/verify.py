@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry import contains_xy
+from ..geometry import contains_xy, multilinestring_of
 from .area import mesh_layer, sample_segments, segments_of
 from .infer import e_per_mm, wall_line_width
 from .read import FILL, MARKER, MachineState, RetractionModel, iter_chunks, parse_layer
@@ -233,8 +233,9 @@ def verify(
             g = mesh_layer(pa, mesh, width, 0.1 * width, 3.0 * width / 0.2)
             if not g.area.is_empty:
                 areas.append(g.area)
-            if g.part is not None:
-                areas.append(g.part)
+        # where Cura's own infill ran (the pass prints Cura's lines where it cannot confirm an area)
+        if fill_a.any():
+            areas.append(multilinestring_of(list(segments_of(ma, fill_a))).buffer(width / 2, 2))
         from ..geometry import unary_union
 
         allowed = unary_union(areas).buffer(width) if areas else None

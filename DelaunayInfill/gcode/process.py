@@ -15,15 +15,15 @@ import shutil
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from ..combing import CombingArea
 from ..geometry import contains_xy, empty_area, polygons_of, to_multipolygon, unary_union
-from ..routing import TravelCost, plan_runs
-from .area import AreaCache, fraction_inside, mesh_layer, runs_of, sample_segments, segments_of
+from ..routing import TravelCost, order_paths, plan_runs
+from .area import AreaCache, MeshLayer, fraction_inside, mesh_layer, runs_of, sample_segments, segments_of
 from .emit import EmitParams, emit_block
 from .estimate import move_seconds, move_times
 from .footer import read_footer
@@ -304,6 +304,46 @@ class _RegionTally:
     target: float
     length: float = 0.0
     area: float = 0.0
+
+
+@dataclass
+class _MeshStep:
+    """One mesh in one layer: its rebuilt geometry and the widths it is processed with (mm)."""
+
+    name: str
+    geo: MeshLayer
+    line_width: float
+    overlap: float
+    closing: float  # closing radius of a FILL hull: about Cura's line spacing
+
+
+@dataclass
+class _HostInfill:
+    """A mesh with its infill-mesh modifiers in one layer: what it prints, and into which of Cura's blocks."""
+
+    mesh: _MeshStep
+    blocks: list  # Cura's FILL blocks of the host and its modifiers (indices into parse.blocks)
+    fill_blocks: list  # those that may carry new paths
+    paths: list  # the new infill (and Cura's lines kept), in print order
+    reach: float  # mm: a Cura line farther than this from new infill is not taken over
+    empty: object  # the 0 % regions (None: none)
+    covered_children: set  # modifiers whose area the host's seamless pattern fills
+    travel_part: object  # where travel may go without leaving the part
+    assigned: dict = field(default_factory=dict)  # block index -> its run of paths
+
+
+@dataclass
+class _LayerOut:
+    """What the layer step has written so far: rewritten blocks, counters, the time added."""
+
+    retraction: RetractionModel
+    replaced: dict = field(default_factory=dict)  # block index -> its new lines
+    stats: dict = field(default_factory=lambda: {
+        "blocks_replaced": 0, "blocks_kept": 0, "infill_travel_mm": 0.0, "infill_retractions": 0,
+        "cura_infill_kept_mm": 0.0, "layers_with_cura_infill_kept": 0})
+    dt: float = 0.0
+    old_times: object = None  # seconds of each of Cura's moves (computed at the first replaced block)
+    layer_epm: dict = field(default_factory=dict)  # E per mm of a mesh's FILL (key: its name), all FILL (None)
 
 
 class _Run:
@@ -653,229 +693,260 @@ class _Run:
         return hit[0]
 
     def _layer(self, parse: LayerParse):
-        s = self.s
+        """Cura's FILL of one parsed layer replaced: areas, density regions, patterns, routes, emit."""
         self.layer_densities = {}
-        m = parse.moves
-        moved = parse.moved()
-        extr = parse.extruding()
+        steps = self._mesh_steps(parse)
+        parent_of = self._modifiers_of(steps)
+        hosts = [n for n in steps if self.s.enabled(n) and n not in parent_of]
+        if not hosts:
+            return None, 0.0, {}
+        for name in hosts:
+            if not steps[name].geo.has_walls:  # a mesh of its own without walls: its area is its FILL hull
+                st = steps[name]
+                st.geo = mesh_layer(parse, name, st.line_width, st.overlap, st.closing, self.area_cache)
+        out = _LayerOut(retraction=self._retraction())
+        for name in hosts:
+            children = [steps[c] for c, p in parent_of.items() if p == name]
+            host = self._host_infill(parse, steps[name], children, out)
+            if host is None:
+                continue
+            self._route(parse, host, out)
+            self._emit_host(parse, host, out)
+        return self._splice(parse, out)
+
+    def _mesh_steps(self, parse: LayerParse) -> dict:
+        """Every mesh with FILL in the layer: its line width, overlap and rebuilt area (`mesh_layer`)."""
+        s = self.s
         is_fill = parse.kind_mask(FILL)
-        blocks = parse.blocks
-        fill_meshes: list[str] = []
-        for b in blocks:
-            if b.has_moves and b.mesh not in fill_meshes:
-                fill_meshes.append(b.mesh)
-                self.mesh_extruder.setdefault(b.mesh, b.extruder)
-        geo = {}
-        lw_of = {}
-        overlap_of = {}
-        reach_of = {}
-        for name in fill_meshes:
+        steps: dict[str, _MeshStep] = {}
+        for b in parse.blocks:
+            if not b.has_moves or b.mesh in steps:
+                continue
+            name = b.mesh
+            self.mesh_extruder.setdefault(name, b.extruder)
             lw = self._line_width(parse, name)
-            lw_of[name] = lw
             ms = s.mesh(name)
             overlap = ms.infill_overlap if ms is not None and ms.infill_overlap is not None else s.infill_overlap
             if overlap is None:
                 overlap = 0.1 * lw
-            overlap_of[name] = overlap
             guess = self.mesh_density.get(name) or self.region_density.get(name) or self.reach_density.get(name)
             if guess is None:
                 # Cura's own density of this mesh sets how far apart its FILL lines are.
-                fill_now = parse.moves
-                sel = parse.mesh_mask(name) & is_fill & (fill_now["de"] > 0)
-                segs = segments_of(fill_now, sel)
-                guess = self._infill_density(segs, lw)
+                sel = parse.mesh_mask(name) & is_fill & (parse.moves["de"] > 0)
+                guess = self._infill_density(segments_of(parse.moves, sel), lw)
                 if guess is not None:
                     self.reach_density[name] = guess  # only sets a closing radius: the first estimate will do
                 guess = guess or 0.2
-            reach = min(25.0, max(2 * lw, 1.5 * lw / max(guess, 0.04)))
-            reach_of[name] = reach
-            geo[name] = mesh_layer(parse, name, lw, overlap, reach, self.area_cache, hull_without_walls=False)
+            closing = min(25.0, max(2 * lw, 1.5 * lw / max(guess, 0.04)))
+            geo = mesh_layer(parse, name, lw, overlap, closing, self.area_cache, hull_without_walls=False)
+            steps[name] = _MeshStep(name, geo, lw, overlap, closing)
+        return steps
 
-        # Which meshes are density regions inside another (Cura infill_mesh modifiers)?
-        hosts = [n for n in fill_meshes if s.enabled(n) and geo[n].has_walls and geo[n].part is not None]
+    def _modifiers_of(self, steps: dict) -> dict[str, str]:
+        """Which meshes are density regions inside another (Cura infill_mesh modifiers): {modifier: host}."""
+        s = self.s
+        hosts = [st for st in steps.values() if s.enabled(st.name) and st.geo.has_walls and st.geo.part is not None]
         parent_of: dict[str, str] = {}
-        for name in fill_meshes:
-            ms = s.mesh(name)
+        for st in steps.values():
+            ms = s.mesh(st.name)
             explicit = ms is not None and ms.region_density is not None
-            if geo[name].has_walls and not explicit:
+            if st.geo.has_walls and not explicit:
                 continue
             for host in hosts:
-                if host == name:
+                if host.name == st.name:
                     continue
-                if self._fraction_inside(geo[name].fill, self._grown(geo[host].part, lw_of[host]), lw_of[host]) >= 0.9:
-                    parent_of[name] = host
+                grown = self._grown(host.geo.part, host.line_width)
+                if self._fraction_inside(st.geo.fill, grown, host.line_width) >= 0.9:
+                    parent_of[st.name] = host.name
                     break
-        normal = [n for n in fill_meshes if s.enabled(n) and n not in parent_of]
-        if not normal:
-            return None, 0.0, {}
-        for name in normal:
-            if not geo[name].has_walls:  # a mesh of its own without walls: its area is its FILL hull
-                geo[name] = mesh_layer(parse, name, lw_of[name], overlap_of[name], reach_of[name], self.area_cache)
+        return parent_of
 
-        z_slice = self._slice_z(parse.z)
-        replaced: dict[int, list[str]] = {}
-        stats = {"blocks_replaced": 0, "blocks_kept": 0, "infill_travel_mm": 0.0, "infill_retractions": 0,
-                 "cura_infill_kept_mm": 0.0, "layers_with_cura_infill_kept": 0}
-        dt = 0.0
-        retraction = self._retraction()
-        old_times = None  # seconds of each of Cura's moves (computed at the first replaced block)
-        layer_epm: dict = {}  # E per mm of a mesh's FILL (key: its name) and of all FILL (key: None)
-        for name in normal:
-            lw = lw_of[name]
-            children = [c for c, p in parent_of.items() if p == name]
-            if not geo[name].used_hull:  # (a hull is made of the lines: witnessed already)
-                geo[name] = self._witnessed(parse, geo[name], [geo[c] for c in children], lw)
-            g = geo[name]
-            area = g.area
-            region_list = []
-            for k, r in enumerate(self.user_regions):
-                a = r.at(z_slice)
-                if not a.is_empty:
-                    region_list.append((a, r.density, r.name or f"region {k + 1}"))
-            # Without user regions here, the regions are the modifier split's parts: disjoint, inside `area`.
-            split_parts_only = not region_list
-            covered_children = set()  # modifiers whose area the host's pattern fills
-            given = {r[2] for r in region_list}
-            # (the modifiers' parts are pieces of the host's area: `_modifier_areas` splits it)
-            for c, ca in zip(children, self._modifier_areas(name, children, geo, lw, overlap_of[name]) if children else [], strict=True):
-                if ca.is_empty:
-                    continue
-                covered_children.add(c)
-                if c in given or c.replace("\\", "/").rsplit("/", 1)[-1] in given:
-                    continue  # the caller gave this modifier's exact mesh as a Region: keep that one only
-                region_list.append((ca, self._region_mesh_density(c, geo[c].fill, lw_of[c], ca), f"mesh {c}"))
-            if area.is_empty:
-                if len(g.fill):  # nothing confirmed: Cura's infill of this mesh stays, and is counted
-                    stats["cura_infill_kept_mm"] += float(np.hypot(*(g.fill[:, 1] - g.fill[:, 0]).T).sum())
-                    stats["layers_with_cura_infill_kept"] = 1
+    def _host_infill(self, parse: LayerParse, st: _MeshStep, children: list, out: _LayerOut):
+        """The new infill of a host mesh and its modifiers (None: none, Cura's stays): its area confirmed by
+        Cura's lines, its density regions, the pattern's paths, and Cura's lines where those do not take over."""
+        lw = st.line_width
+        blocks = parse.blocks
+        if not st.geo.used_hull:  # (a hull is made of the lines: witnessed already)
+            st.geo = self._witnessed(parse, st.geo, [c.geo for c in children], lw)
+        g = st.geo
+        area = g.area
+        region_list = [(a, r.density, r.name or f"region {k + 1}") for k, r in enumerate(self.user_regions)
+                       for a in [r.at(self._slice_z(parse.z))] if not a.is_empty]
+        # Without user regions here, the regions are the modifier split's parts: disjoint, inside `area`.
+        split_parts_only = not region_list
+        covered_children = set()  # modifiers whose area the host's pattern fills
+        given = {r[2] for r in region_list}
+        # (the modifiers' parts are pieces of the host's area: `_modifier_areas` splits it)
+        parts = self._modifier_areas(st, children) if children else []
+        for c, ca in zip(children, parts, strict=True):
+            if ca.is_empty:
                 continue
-            density = self._density_of(name, g.fill, lw, area)
-            if density <= 0.0:
-                continue  # a 0 % mesh has no infill (Cura made none)
-            # 0 % regions are "no infill there": cut out of the area, not given to the engine
-            full_area = area
-            region_list, empty, empty_parts = _split_empty_regions(region_list)
-            if empty is not None:
-                area = to_multipolygon(area.difference(empty))
-            my_blocks = [i for i, b in enumerate(blocks) if b.has_moves and (b.mesh == name or b.mesh in children)]
-            # Every FILL block of the host and its modifiers may carry new paths, travel-only ones too
-            # (Cura's hops between its blocks): a path printed on the way costs no travel.
-            fill_blocks = [bi for bi in my_blocks if not blocks[bi].unsupported] or my_blocks[:1]
-            if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
-                paths, used_regions = [], []
-            else:
-                pattern, footprint, used_regions = self.patterns.get(name, area, density, lw, region_list)
-                first = blocks[fill_blocks[0]].before
-                start = (first.x, first.y) if math.isfinite(first.x) else None
-                result = self._clip(pattern, self._line_area(area, lw, overlap_of[name]), start)
-                paths = self._paths(result, min_length=lw / 2)
-                self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
-            # Cura's lines where the new infill does not take over (a part not confirmed, an island too
-            # small for the pattern) are printed as Cura printed them.
-            reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
-            cura_fill = np.concatenate([g.fill, *(geo[c].fill for c in children)])
-            kept = kept_cura_pieces(cura_fill, area, paths, lw, reach, empty)
-            if kept:
-                paths = [*paths, *kept]
-                stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))
-                stats["layers_with_cura_infill_kept"] = 1
-            for part, zname in empty_parts:
-                self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
-            travel_part = g.part if g.part is not None else area.buffer(lw / 2)
-            assigned: dict[int, list[np.ndarray]] = {i: [] for i in my_blocks}
-            if paths and len(fill_blocks) == 1:
-                assigned[fill_blocks[0]] = list(paths)
-            elif paths:
-                # The host's and its modifiers' FILL blocks share the layer's route in runs of
-                # consecutive paths, cut where the least travel is added (`plan_runs`): the route
-                # keeps its order, Cura's blocks keep theirs.  A travel that leaves the part is
-                # retracted (when Cura retracts): it costs about as much as this much more travel.
-                penalty = _RETRACT_TRAVEL_MM if retraction.seen else 0.0
-                self._share_paths(paths, fill_blocks, blocks, travel_part, penalty, assigned)
-            # A block that got no new path keeps Cura's infill only where the new pattern leaves a gap.
-            new_tree = None
-            for bi in my_blocks:
-                blk = blocks[bi]
-                mask = (m["block"] == bi)
-                had_fill = extrudes = bool((mask & extr).any())
-                new_paths = assigned.get(bi, [])
-                if had_fill and not new_paths and paths and blk.mesh in covered_children:
-                    # The host's seamless pattern fills this modifier's area (printed from other
-                    # blocks): keeping Cura's lines here would print it twice.
-                    had_fill = False
-                elif not blk.unsupported and not new_paths and had_fill and (paths or empty is not None):
-                    probe = sample_segments(segments_of(m, mask & extr), 2.0)
-                    covered = np.zeros(len(probe), dtype=bool)
-                    if paths:
-                        if new_tree is None:
-                            new_tree = cKDTree(np.concatenate([sample_segments(np.stack([p[:-1], p[1:]], axis=1), lw) for p in paths]))
-                        covered |= new_tree.query(probe)[0] <= reach
-                    if empty is not None:  # places of a 0 % region need no infill
-                        covered |= contains_xy(empty, probe[:, 0], probe[:, 1])
-                    had_fill = float(covered.mean()) < 0.9
-                if blk.unsupported or (not new_paths and had_fill):
-                    stats["blocks_kept"] += 1
-                    continue
-                # a block that extrudes nothing takes its mesh's FILL rate, else the layer's (both
-                # remembered for the layer: a modifier's travel-only blocks ask again and again)
-                epm = _block_rate(parse, mask & extr, blk.mesh, extr & is_fill, layer_epm) if extrudes else None
-                if epm is None:
-                    if blk.mesh not in layer_epm:
-                        layer_epm[blk.mesh] = e_per_mm(parse, extr & is_fill & parse.mesh_mask(blk.mesh))
-                    epm = layer_epm[blk.mesh]
-                if epm is None:
-                    if None not in layer_epm:
-                        layer_epm[None] = e_per_mm(parse, extr & is_fill)
-                    epm = layer_epm[None]
-                if epm is None:
-                    if new_paths:
-                        stats["blocks_kept"] += 1
-                        continue
-                    epm = 0.0
-                ms = s.mesh(blk.mesh)
-                speed = ms.speed if ms is not None and ms.speed else s.speed
-                if speed:
-                    print_f = speed * 60.0
-                elif had_fill:
-                    print_f = float(m["f"][mask & extr][0])
-                else:
-                    fills = m["f"][extr & is_fill]
-                    print_f = float(fills[0]) if fills.size else blk.before.f
-                g0 = m["f"][mask & ~extr & moved]
-                travel_f = s.travel_speed * 60.0 if s.travel_speed else (retraction.travel_f or (float(g0.max()) if g0.size else 9000.0))
-                params = EmitParams(
-                    e_per_mm=epm * s.flow,
-                    print_f=print_f,
-                    travel_f=travel_f,
-                    retraction=retraction,
-                    part=travel_part,
-                    min_travel=s.retraction_min_travel if s.retraction_min_travel is not None else 2 * lw,
-                    layer_z=parse.z,
-                    xy_words=self.xy_words,
-                    comb=self._combing_area(travel_part, lw) if s.combing else None,
-                    comb_max=s.combing_max_distance,
-                    acceleration=self.acceleration,
-                    jerk=s.jerk,
-                )
-                out = emit_block(new_paths, blk.before, blk.after, params, blk.extra_lines)
-                replaced[bi] = out.lines
-                if old_times is None:
-                    old_times = _move_seconds(m, self.acceleration, s.jerk)
-                old_t = float(old_times[mask].sum())
-                new_t = out.seconds + (float(move_times(np.concatenate(out.dist), np.concatenate(out.feed), self.acceleration).sum()) if out.dist else 0.0)
-                dt += new_t - old_t
-                # Net change of the filament used: every E move of the new block minus those of Cura's.
-                old_net = float(m["de"][mask].sum())  # not after.e - before.e: Cura may G92 E0 inside
-                self.e_delta[blk.extruder] = self.e_delta.get(blk.extruder, 0.0) + out.net_e - old_net
-                old_len = float(parse.xy_length()[mask & extr & is_fill].sum())
-                self.report.infill_after_mm += out.extrude_mm - old_len
-                stats["blocks_replaced"] += 1
-                stats["infill_travel_mm"] += out.travel_mm
-                stats["infill_retractions"] += out.retractions
-        if not replaced:
+            covered_children.add(c.name)
+            if c.name in given or c.name.replace("\\", "/").rsplit("/", 1)[-1] in given:
+                continue  # the caller gave this modifier's exact mesh as a Region: keep that one only
+            region_list.append((ca, self._region_mesh_density(c.name, c.geo.fill, c.line_width, ca), f"mesh {c.name}"))
+        if area.is_empty:
+            if len(g.fill):  # nothing confirmed: Cura's infill of this mesh stays, and is counted
+                out.stats["cura_infill_kept_mm"] += float(np.hypot(*(g.fill[:, 1] - g.fill[:, 0]).T).sum())
+                out.stats["layers_with_cura_infill_kept"] = 1
+            return None
+        density = self._density_of(st.name, g.fill, lw, area)
+        if density <= 0.0:
+            return None  # a 0 % mesh has no infill (Cura made none)
+        # 0 % regions are "no infill there": cut out of the area, not given to the engine
+        full_area = area
+        region_list, empty, empty_parts = _split_empty_regions(region_list)
+        if empty is not None:
+            area = to_multipolygon(area.difference(empty))
+        names = {st.name, *(c.name for c in children)}
+        my_blocks = [i for i, b in enumerate(blocks) if b.has_moves and b.mesh in names]
+        # Every FILL block of the host and its modifiers may carry new paths, travel-only ones too
+        # (Cura's hops between its blocks): a path printed on the way costs no travel.
+        fill_blocks = [bi for bi in my_blocks if not blocks[bi].unsupported] or my_blocks[:1]
+        first = blocks[fill_blocks[0]].before
+        start = (first.x, first.y) if math.isfinite(first.x) else None
+        if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
+            paths, used_regions = [], []
+        else:
+            pattern, _, used_regions = self.patterns.get(st.name, area, density, lw, region_list)
+            result = self._clip(pattern, self._line_area(area, lw, st.overlap), start)
+            paths = self._paths(result, min_length=lw / 2)
+            self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
+        # Cura's lines where the new infill does not take over (a part not confirmed, an island too
+        # small for the pattern) are printed as Cura printed them, on the route with the new paths.
+        reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
+        cura_fill = np.concatenate([g.fill, *(c.geo.fill for c in children)])
+        kept = kept_cura_pieces(cura_fill, area, paths, lw, reach, empty)
+        if kept:
+            paths, _ = order_paths([*paths, *kept], start)
+            out.stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))
+            out.stats["layers_with_cura_infill_kept"] = 1
+        for part, zname in empty_parts:
+            self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
+        travel_part = g.part if g.part is not None else area.buffer(lw / 2)
+        return _HostInfill(st, my_blocks, fill_blocks, paths, reach, empty, covered_children, travel_part)
+
+    def _route(self, parse: LayerParse, host: _HostInfill, out: _LayerOut) -> None:
+        """The host's paths shared among its FILL blocks (`host.assigned`)."""
+        host.assigned = {i: [] for i in host.blocks}
+        if host.paths and len(host.fill_blocks) == 1:
+            host.assigned[host.fill_blocks[0]] = list(host.paths)
+        elif host.paths:
+            # The host's and its modifiers' FILL blocks share the layer's route in runs of
+            # consecutive paths, cut where the least travel is added (`plan_runs`): the route
+            # keeps its order, Cura's blocks keep theirs.  A travel that leaves the part is
+            # retracted (when Cura retracts): it costs about as much as this much more travel.
+            penalty = _RETRACT_TRAVEL_MM if out.retraction.seen else 0.0
+            self._share_paths(host.paths, host.fill_blocks, parse.blocks, host.travel_part, penalty, host.assigned)
+
+    def _emit_host(self, parse: LayerParse, host: _HostInfill, out: _LayerOut) -> None:
+        """Each of the host's FILL blocks rewritten with its paths, or kept as Cura's."""
+        m, extr = parse.moves, parse.extruding()
+        new_tree = None
+        for bi in host.blocks:
+            blk = parse.blocks[bi]
+            mask = m["block"] == bi
+            had_fill = bool((mask & extr).any())
+            new_paths = host.assigned.get(bi, [])
+            if had_fill and not new_paths and host.paths and blk.mesh in host.covered_children:
+                # The host's seamless pattern fills this modifier's area (printed from other
+                # blocks): keeping Cura's lines here would print it twice.
+                had_fill = False
+            elif not blk.unsupported and not new_paths and had_fill and (host.paths or host.empty is not None):
+                # A block that got no new path keeps Cura's infill only where the new pattern leaves a gap.
+                probe = sample_segments(segments_of(m, mask & extr), 2.0)
+                covered = np.zeros(len(probe), dtype=bool)
+                if host.paths:
+                    if new_tree is None:
+                        new_tree = cKDTree(np.concatenate([sample_segments(np.stack([p[:-1], p[1:]], axis=1),
+                                                                           host.mesh.line_width) for p in host.paths]))
+                    covered |= new_tree.query(probe)[0] <= host.reach
+                if host.empty is not None:  # places of a 0 % region need no infill
+                    covered |= contains_xy(host.empty, probe[:, 0], probe[:, 1])
+                had_fill = float(covered.mean()) < 0.9
+            if blk.unsupported or (not new_paths and had_fill):
+                out.stats["blocks_kept"] += 1
+                continue
+            self._emit_block(parse, host, bi, new_paths, had_fill, out)
+
+    def _emit_block(self, parse: LayerParse, host: _HostInfill, bi: int, new_paths: list, had_fill: bool,
+                    out: _LayerOut) -> None:
+        """One FILL block rewritten: Cura's E per mm and speeds, travels combed, Cura's state handed back."""
+        s = self.s
+        m, extr, moved = parse.moves, parse.extruding(), parse.moved()
+        is_fill = parse.kind_mask(FILL)
+        blk = parse.blocks[bi]
+        mask = m["block"] == bi
+        extrudes = bool((mask & extr).any())
+        lw = host.mesh.line_width
+        # a block that extrudes nothing takes its mesh's FILL rate, else the layer's (both
+        # remembered for the layer: a modifier's travel-only blocks ask again and again)
+        layer_epm = out.layer_epm
+        epm = _block_rate(parse, mask & extr, blk.mesh, extr & is_fill, layer_epm) if extrudes else None
+        if epm is None:
+            if blk.mesh not in layer_epm:
+                layer_epm[blk.mesh] = e_per_mm(parse, extr & is_fill & parse.mesh_mask(blk.mesh))
+            epm = layer_epm[blk.mesh]
+        if epm is None:
+            if None not in layer_epm:
+                layer_epm[None] = e_per_mm(parse, extr & is_fill)
+            epm = layer_epm[None]
+        if epm is None:
+            if new_paths:
+                out.stats["blocks_kept"] += 1
+                return
+            epm = 0.0
+        ms = s.mesh(blk.mesh)
+        speed = ms.speed if ms is not None and ms.speed else s.speed
+        if speed:
+            print_f = speed * 60.0
+        elif had_fill:
+            print_f = float(m["f"][mask & extr][0])
+        else:
+            fills = m["f"][extr & is_fill]
+            print_f = float(fills[0]) if fills.size else blk.before.f
+        g0 = m["f"][mask & ~extr & moved]
+        retraction = out.retraction
+        travel_f = s.travel_speed * 60.0 if s.travel_speed else (retraction.travel_f or (float(g0.max()) if g0.size else 9000.0))
+        params = EmitParams(
+            e_per_mm=epm * s.flow,
+            print_f=print_f,
+            travel_f=travel_f,
+            retraction=retraction,
+            part=host.travel_part,
+            min_travel=s.retraction_min_travel if s.retraction_min_travel is not None else 2 * lw,
+            layer_z=parse.z,
+            xy_words=self.xy_words,
+            comb=self._combing_area(host.travel_part, lw) if s.combing else None,
+            comb_max=s.combing_max_distance,
+            acceleration=self.acceleration,
+            jerk=s.jerk,
+        )
+        written = emit_block(new_paths, blk.before, blk.after, params, blk.extra_lines)
+        out.replaced[bi] = written.lines
+        if out.old_times is None:
+            out.old_times = _move_seconds(m, self.acceleration, s.jerk)
+        old_t = float(out.old_times[mask].sum())
+        new_t = written.seconds + (float(move_times(np.concatenate(written.dist), np.concatenate(written.feed),
+                                                    self.acceleration).sum()) if written.dist else 0.0)
+        out.dt += new_t - old_t
+        # Net change of the filament used: every E move of the new block minus those of Cura's.
+        old_net = float(m["de"][mask].sum())  # not after.e - before.e: Cura may G92 E0 inside
+        self.e_delta[blk.extruder] = self.e_delta.get(blk.extruder, 0.0) + written.net_e - old_net
+        old_len = float(parse.xy_length()[mask & extr & is_fill].sum())
+        self.report.infill_after_mm += written.extrude_mm - old_len
+        out.stats["blocks_replaced"] += 1
+        out.stats["infill_travel_mm"] += written.travel_mm
+        out.stats["infill_retractions"] += written.retractions
+
+    def _splice(self, parse: LayerParse, out: _LayerOut):
+        """The layer's lines with the rewritten blocks in place, where its ;TIME_ELAPSED: lines went, the edits."""
+        stats = out.stats
+        if not out.replaced:
             return None, 0.0, {k: stats[k] for k in ("blocks_kept", "cura_infill_kept_mm", "layers_with_cura_infill_kept")}
-        if not math.isfinite(dt):
+        if not math.isfinite(out.dt):
             raise ValueError("the print-time estimate of the new moves is not finite")
+        blocks, replaced = parse.blocks, out.replaced
         order = sorted(replaced, key=lambda i: blocks[i].start)
         out_lines = splice_blocks(parse.lines, [(blocks[bi].start, blocks[bi].stop, replaced[bi]) for bi in order])
         # (start, stop, new lines, state before, state after) of each replaced block
@@ -885,7 +956,7 @@ class _Run:
         time_lines = [t + sum(added for stop, added in shifts if t >= stop) for t in parse.time_elapsed_lines]
         if not all(out_lines[t].startswith(";TIME_ELAPSED:") for t in time_lines):
             time_lines = _time_lines(out_lines)
-        return (out_lines, time_lines, edits), dt, stats
+        return (out_lines, time_lines, edits), out.dt, stats
 
     def _witnessed(self, parse: LayerParse, g, children: list, lw: float):
         """`g` with its area cut to what Cura's FILL lines of it and its modifiers confirm (remembered)."""
@@ -982,27 +1053,28 @@ class _Run:
                 self.cura_density[mesh] = d
         return d
 
-    def _modifier_areas(self, host: str, children: list[str], geo: dict, lw: float, overlap: float) -> list:
+    def _modifier_areas(self, host: _MeshStep, children: list) -> list:
         """Areas of a host's infill-mesh modifiers in this layer (one split of the host's area).
 
         Cura ends infill lines half a line width minus the infill overlap
         inside their area, so the modifiers' borders are found from where
         their lines end (`split_by_line_ends`).
         """
-        names = [host, *children]
+        meshes = [host, *children]
+        lw, overlap = host.line_width, host.overlap
+        # The host's area (inside its walls) holds its modifiers' parts: Cura cuts them out of it.
+        area = host.geo.area
         h = hashlib.blake2b(digest_size=16)
-        for n in names:
-            h.update(n.encode() + b"|" + np.round(geo[n].fill, 3).tobytes() + b"|")
+        for st in meshes:
+            h.update(st.name.encode() + b"|" + np.round(st.geo.fill, 3).tobytes() + b"|")
         h.update(np.array([lw, overlap]).tobytes())
-        key = h.digest()
+        key = (h.digest(), _shape_key(area))
         hit = self.modifier_areas.get(key)
         if hit is not None:
             return hit
-        # The host's area (inside its walls) holds its modifiers' parts: Cura cuts them out of it.
-        area = geo[host].area
-        spacings = [lw / self._cura_density(n, geo[n].fill, lw) for n in names]
+        spacings = [lw / self._cura_density(st.name, st.geo.fill, lw) for st in meshes]
         end_inset = max(0.0, lw / 2 - overlap)
-        parts = split_by_line_ends(area, [geo[n].fill for n in names], spacings, end_inset, step=max(lw, 0.25))[1:]
+        parts = split_by_line_ends(area, [st.geo.fill for st in meshes], spacings, end_inset, step=max(lw, 0.25))[1:]
         if len(self.modifier_areas) > 64:
             self.modifier_areas.clear()
         self.modifier_areas[key] = parts

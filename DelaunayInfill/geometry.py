@@ -18,6 +18,7 @@ from shapely.geometry import (
     MultiLineString,
     MultiPoint,
     MultiPolygon,
+    Point,
     Polygon,
     box,
 )
@@ -37,6 +38,7 @@ __all__ = [
     "covers_segments",
     "distances",
     "empty_area",
+    "points_of",
     "polygons_from",
     "polygons_of",
     "rings_of",
@@ -81,6 +83,14 @@ def distances(geometries, other: BaseGeometry) -> np.ndarray:
     if SHAPELY2:
         return np.asarray(shapely.distance(np.asarray(geometries, dtype=object), other), dtype=float)
     return np.array([g.distance(other) for g in geometries], dtype=float)  # pragma: no cover
+
+
+def points_of(xy) -> list[Point]:
+    """Point geometries of coordinates, shape (k, 2) mm (vectorized on shapely 2)."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    if SHAPELY2:
+        return list(shapely.points(xy))
+    return [Point(p) for p in xy.tolist()]  # pragma: no cover
 
 
 def polygons_from(rings) -> list[Polygon]:

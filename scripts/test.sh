@@ -8,7 +8,8 @@
 #   unit    pytest tests/ (not engine, not gui) on three dependency sets:
 #           current pins, and the oldest pins Cura brings that have Python 3.11 wheels
 #           (numpy 1.23.5, scipy 1.9.3, with shapely 1.8.5 and with shapely 2.0.1)
-#   engine  tests/engine: real CuraEngine 4.13 slices, processed and checked independently
+#   engine  tests/engine: real CuraEngine 4.13 slices (and 5.0 in a trixie chroot,
+#           scripts/cura5_chroot.sh), processed and checked independently
 #   gui     tests/gui: the real Cura 4.13 under Xvfb loads the plugin, slices, saves
 # A tier that cannot run fails; nothing is skipped.  Ends with one line "tests: N passed, M failed".
 set -u
@@ -60,7 +61,7 @@ run_pytest() {  # run_pytest LABEL VENV ARGS...
   if [ $rc -ne 0 ]; then FAILED_STEPS+=("$label (exit $rc)"); fi
 }
 
-TEST_DEPS=(pytest hypothesis matplotlib)
+TEST_DEPS=(pytest hypothesis matplotlib manifold3d)
 CURRENT=(numpy scipy shapely)
 OLDEST_S18=(numpy==1.23.5 scipy==1.9.3 shapely==1.8.5)
 OLDEST_S20=(numpy==1.23.5 scipy==1.9.3 shapely==2.0.1)
@@ -77,6 +78,14 @@ run_pytest unit-oldest-shapely20 oldest-shapely20 "${UNIT[@]}"
 
 if [ "$WHAT" = all ]; then
   need_apt cura-engine cura xvfb xauth imagemagick python3-zeroconf python3-pip iproute2 || FAILED_STEPS+=("apt-get install")
+  # CuraEngine 5.0 lives in a Debian trixie chroot (Debian 12 has 4.13 only): build or refresh it
+  # (2-4 minutes the first time, about a second after that); the engine tier slices with both
+  log "trixie chroot with CuraEngine 5.0 (scripts/cura5_chroot.sh)"
+  if [ "$(id -u)" = 0 ]; then
+    bash scripts/cura5_chroot.sh || FAILED_STEPS+=("cura5_chroot.sh (CuraEngine 5.0 chroot)")
+  else
+    sudo bash scripts/cura5_chroot.sh || FAILED_STEPS+=("cura5_chroot.sh (CuraEngine 5.0 chroot)")
+  fi
   # tests/engine and the real-CuraEngine tests beside the unit tests (marked engine, left out above)
   run_pytest engine current tests -m engine --ignore=tests/gui
   run_pytest gui current tests/gui

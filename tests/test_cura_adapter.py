@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from DelaunayInfill.cura.adapter import adjusted_estimates, build_settings, failed_layers
+from DelaunayInfill.cura.adapter import adjusted_estimates, build_settings, failed_layers, kept_message
 from DelaunayInfill.cura.snapshot import MeshSnapshot, SceneSnapshot
 from DelaunayInfill.gcode import ProcessReport
 
@@ -122,3 +122,18 @@ def test_the_time_estimate_takes_cura_s_jerk():
     assert build_settings(_snapshot([star]))[0].jerk == 20.0  # fdmprinter's default
     assert build_settings(_snapshot([star], machine_max_jerk_xy=10))[0].jerk == 10.0
     assert build_settings(_snapshot([star], machine_max_jerk_xy=10, jerk_enabled=True))[0].jerk == 8.0
+
+
+def test_cura_s_infill_pattern_reaches_the_pass():
+    settings, _ = build_settings(_snapshot([_model("star.stl", infill_pattern="lightning")]))
+    assert settings.infill_pattern == "lightning"
+    settings, _ = build_settings(_snapshot([_model("star.stl")]))
+    assert settings.infill_pattern is None
+
+
+def test_the_message_tells_where_cura_s_infill_was_kept():
+    assert kept_message(ProcessReport()) is None
+    text = kept_message(ProcessReport(cura_infill_kept_mm=123.4, layers_with_cura_infill_kept=7,
+                                      warnings=["Cura's lightning infill kept: choose another pattern"]))
+    assert "7 layer(s)" in text and "123 mm" in text
+    assert text.endswith("Cura's lightning infill kept: choose another pattern.")

@@ -169,6 +169,17 @@ def test_kept_cura_pieces_where_no_new_line_takes_over():
     assert kept_cura_pieces(cura[:1], area, [], LW, 3.0, no_infill=box(0, 0, 20, 5)) == []
 
 
+def test_a_stub_of_new_infill_does_not_take_over_a_small_island():
+    island = box(0, 0, 2.5, 2.5)  # a letter's stroke: the pattern leaves a 0.3 mm stub in it
+    cura = np.array([[[0.3, 1.2], [2.2, 1.2]], [[1.2, 0.3], [1.2, 2.2]]])
+    stub = [np.array([[1.0, 1.0], [1.3, 1.0]])]
+    kept = kept_cura_pieces(cura, island, stub, LW, reach=5.0)
+    assert abs(sum(LineString(k).length for k in kept) - 3.8) < 0.1
+    # in a large piece the same stub takes over what it reaches
+    big = box(0, 0, 30, 30)
+    assert kept_cura_pieces(cura, big, stub, LW, reach=5.0) == []
+
+
 # ----------------------------------------------------------------------------- end to end
 def test_no_new_infill_in_a_hole_whose_wall_came_in_three_pieces():
     features, hole = _ring_layer(3)
@@ -290,6 +301,8 @@ def test_lightning_keeps_cura_infill_and_says_so():
     assert any("lightning" in w for w in report.warnings)
     assert _fill_segments("".join(out)).keys() == _fill_segments(text).keys()
     assert all(np.allclose(a, b) for a, b in zip(_fill_segments("".join(out)).values(), _fill_segments(text).values()))
-    # asked for a density, the user gets Delaunay infill anyway
-    _, report = process_gcode(as_cura_list(text), ProcessSettings(density=0.1))
+    # the plugin says so from Cura's settings (no footer in Cura's own G-code before it is saved)
+    _, report = process_gcode(as_cura_list(_gcode([features] * 3)), ProcessSettings(density=0.1, infill_pattern="lightning"))
+    assert report.layers_processed == 0 and any("lightning" in w for w in report.warnings)
+    _, report = process_gcode(as_cura_list(_gcode([features] * 3)), ProcessSettings(density=0.1, infill_pattern="grid"))
     assert report.layers_processed == 3

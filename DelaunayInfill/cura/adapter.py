@@ -121,6 +121,7 @@ def build_settings(snapshot):
         flow=1.0,
         seed=int(_number(primary.values.get("delaunay_infill_seed"), 0.0)),
         layout=str(primary.values.get("delaunay_infill_layout") or "seamless"),
+        infill_pattern=str(primary.values.get("infill_pattern") or "") or None,
         meshes=meshes,
         process_unlisted_meshes=False,
         filament_diameter=_number(extruder.get("material_diameter")),
@@ -171,6 +172,19 @@ def run_pipeline(layers, snapshot, progress=None, cancel=None):
 def failed_layers(report) -> list:
     """Layer numbers that kept Cura's infill (empty when all went well)."""
     return list(getattr(report, "failed_layers", None) or [])
+
+
+def kept_message(report) -> str | None:
+    """What the user is told of Cura's infill kept where the new infill could not be confirmed (None: nothing)."""
+    parts = []
+    kept_mm = _number(getattr(report, "cura_infill_kept_mm", None), 0.0)
+    layers = int(_number(getattr(report, "layers_with_cura_infill_kept", None), 0.0))
+    if kept_mm > 0:
+        parts.append(f"Cura's own infill lines were kept in {layers} layer(s) ({kept_mm:.0f} mm of line): where "
+                     "the walls and skin did not confirm an infill area, or a part is too small for the "
+                     "Delaunay pattern.")
+    parts += [f"{w[0].upper()}{w[1:]}." if not w.endswith(".") else w for w in getattr(report, "warnings", None) or []]
+    return " ".join(parts) or None
 
 
 def adjusted_estimates(times_per_feature: dict, material_amounts: list, report, snapshot):

@@ -354,7 +354,7 @@ class DelaunayInfillExtension(Extension):
             self._applying = False
 
     def _reportKeptLayers(self, report) -> None:
-        from .adapter import failed_layers
+        from .adapter import failed_layers, kept_message
 
         layers = failed_layers(report)
         if layers:
@@ -364,6 +364,9 @@ class DelaunayInfillExtension(Extension):
                 f"made there (layers {shown}).",
                 lifetime=30,
             )
+        kept = kept_message(report)
+        if kept:
+            _show_message(kept, lifetime=30)
 
     def _reEmitEstimates(self, job) -> None:
         """Tell Cura's print information the new infill time and material."""

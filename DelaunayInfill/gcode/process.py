@@ -392,12 +392,13 @@ class _Run:
         self.mesh_extruder: dict[str, int] = {}
         # Lightning infill shows only where it supports a top skin, not where infill may go: no witness
         # confirms the area, so Cura's infill stays.
-        self.keep_cura = (settings.density is None and any(
-            self.footer.infill_pattern(e) == "lightning" for e in range(max(1, len(self.footer.extruder_values)))))
+        patterns = {settings.infill_pattern} if settings.infill_pattern else {
+            self.footer.infill_pattern(e) for e in range(max(1, len(self.footer.extruder_values)))}
+        self.keep_cura = "lightning" in patterns
         if self.keep_cura:
             self.report.warnings.append(
-                "Cura's lightning infill kept: its lines do not show where infill may go. Choose another infill "
-                "pattern (grid) in Cura to have it replaced, or give --density to replace it anyway")
+                "Cura's lightning infill kept: its lines do not show where infill may go. Choose another "
+                "infill pattern (grid, for one) in Cura to have it replaced")
         self.lw_warned = False
         self.any_lw: float | None = None
 

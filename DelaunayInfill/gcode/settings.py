@@ -64,6 +64,9 @@ class ProcessSettings:
     # a layer that repeats an earlier one (a prism's middle layers) is written from that layer's
     # result (gcode/replay.py); False processes every layer on its own (for tests: same output)
     repeat_layers: bool = True
+    # Cura's infill pattern of the print (None: from the G-code's settings footer, if it has one);
+    # lightning infill is kept as Cura made it
+    infill_pattern: str | None = None
 
     def validate(self) -> None:
         """Raise ValueError with a clear message for impossible values."""

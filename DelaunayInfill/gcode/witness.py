@@ -19,7 +19,17 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry import contains_xy, empty_area, multilinestring_of, polygons_of, to_multipolygon, unary_union
+from ..geometry import (
+    boundary_segments,
+    contains_xy,
+    distances,
+    empty_area,
+    multilinestring_of,
+    points_of,
+    polygons_of,
+    to_multipolygon,
+    unary_union,
+)
 from .area import sample_segments
 
 __all__ = ["witnessed", "kept_cura_pieces", "witness_radius"]
@@ -56,11 +66,55 @@ def witnessed(area, runs: list[np.ndarray], line_width: float, radius: float):
         return empty_area()
     segments = np.concatenate([np.stack([r[:-1], r[1:]], axis=1) for r in runs])
     points = sample_segments(segments, line_width)
-    held = [p for p in polygons_of(area) if contains_xy(p, points[:, 0], points[:, 1]).any()]
+    pieces = polygons_of(area)
+    held = [p for p in pieces if contains_xy(p, points[:, 0], points[:, 1]).any()]
     if not held:
         return empty_area()
+    confirmed = to_multipolygon(area if len(held) == len(pieces) else unary_union(held))
+    if _within_reach(confirmed, points, radius):
+        return confirmed  # (the usual case: no need to build the lines' reach)
     reach = multilinestring_of(runs).buffer(radius, 2)
-    return to_multipolygon(unary_union(held).intersection(reach))
+    return to_multipolygon(confirmed.intersection(reach))
+
+
+def _within_reach(area, points: np.ndarray, radius: float) -> bool:
+    """Whether every place of `area` lies within `radius` of `points`, judged on a lattice.
+
+    A place's nearest node of a lattice of step h lies within h / sqrt(2) of
+    it.  When that node is inside `area` it is tested against
+    ``radius - h / sqrt(2)``; when it is outside, the place lies within
+    h / sqrt(2) of the border, so within h / sqrt(2) + b / 2 of one of the
+    border's samples (b apart), which are tested against that much less.
+    (h = radius / 4, b = h / 4: Cura's lines stop short of the border, so its
+    places are the farthest from them.)
+    False may be said of an area that is within reach: then the exact test
+    decides.
+
+    Parameters
+    ----------
+    area : MultiPolygon
+    points : ndarray, shape (k, 2)
+        Samples on the lines, mm.
+    radius : float
+        mm.
+    """
+    step = radius / 4.0
+    border_step = step / 4.0
+    minx, miny, maxx, maxy = area.bounds
+    xs = np.arange(minx, maxx + step, step)
+    ys = np.arange(miny, maxy + step, step)
+    if len(xs) * len(ys) > 200_000:
+        return False
+    gx, gy = np.meshgrid(xs, ys)
+    nodes = np.column_stack([gx.ravel(), gy.ravel()])
+    nodes = nodes[contains_xy(area, nodes[:, 0], nodes[:, 1])]
+    border = sample_segments(boundary_segments(area), border_step)
+    tree = cKDTree(points)
+    # (a sample is on a line: within reach of a sample is within reach of the lines)
+    inner = tree.query(nodes, distance_upper_bound=radius)[0] if len(nodes) else np.zeros(0)
+    edge = tree.query(border, distance_upper_bound=radius)[0] if len(border) else np.zeros(0)
+    half_diagonal = step / np.sqrt(2.0)
+    return bool((inner <= radius - half_diagonal).all() and (edge <= radius - half_diagonal - border_step / 2).all())
 
 
 def kept_cura_pieces(
@@ -75,9 +129,12 @@ def kept_cura_pieces(
     """Stretches of Cura's FILL lines that the new infill does not take over.
 
     A place of a Cura line is kept when it lies outside `area` (grown by a line
-    width: Cura's lines end at its border) or has no new line within `reach`
-    inside the same piece of `area`; places in `no_infill` (0 % regions) are
-    never kept.  Neighbouring kept places form one piece.
+    width: Cura's lines end at its border), or has no new line within `reach`
+    inside the same piece of `area`, or its piece is small (at most `reach`
+    squared) and holds less than half as much new infill as Cura's (an island
+    the pattern barely reaches); places in
+    `no_infill` (0 % regions) are never kept.  Neighbouring kept places form
+    one piece.
 
     Parameters
     ----------
@@ -93,7 +150,7 @@ def kept_cura_pieces(
         mm.
     no_infill : (Multi)Polygon, optional
     min_length : float, optional
-        Pieces shorter than this are dropped (two line widths by default), mm.
+        Pieces shorter than this are dropped (one line width by default), mm.
 
     Returns
     -------
@@ -104,7 +161,7 @@ def kept_cura_pieces(
         return []
     step = line_width / 2
     if min_length is None:
-        min_length = 2.0 * line_width
+        min_length = line_width
     d = cura[:, 1] - cura[:, 0]
     length = np.hypot(d[:, 0], d[:, 1])
     n = np.maximum(1, np.ceil(length / step).astype(np.int64))
@@ -149,24 +206,41 @@ def kept_cura_pieces(
 
 
 def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width: float, reach: float) -> np.ndarray:
-    """Whether each point is outside `area` (grown by a line width) or has no new line within `reach` in its piece."""
+    """Whether each point is outside `area` (grown by a line width) or not taken over in its piece (see above)."""
     out = np.ones(len(points), dtype=bool)
     if area is None or area.is_empty:
         return out
-    new = (np.concatenate([sample_segments(np.stack([p[:-1], p[1:]], axis=1), line_width / 2) for p in new_paths
-                           if len(p) >= 2]) if new_paths else np.zeros((0, 2)))
+    new = _samples(new_paths, line_width / 2)
+    # the points of the area: inside it, or within a line width of it (Cura's lines end at its border)
+    member = contains_xy(area, points[:, 0], points[:, 1])
+    rest = np.flatnonzero(~member)
+    if len(rest):
+        member[rest[distances(points_of(points[rest]), area) <= line_width]] = True
+    decided = np.zeros(len(points), dtype=bool)
     for piece in polygons_of(area):
+        if piece.area > reach * reach:
+            continue
+        # a small piece with far less new infill than Cura's (an island the pattern barely reaches):
+        # Cura's lines stay (points every half line width on both: their counts compare lengths)
         grown = piece.buffer(line_width, 2)
-        mine = contains_xy(grown, points[:, 0], points[:, 1])
+        mine = member & ~decided & contains_xy(grown, points[:, 0], points[:, 1])
         if not mine.any():
             continue
-        if len(new):
-            theirs = new[contains_xy(grown, new[:, 0], new[:, 1])]
-        else:
-            theirs = new
-        if len(theirs) == 0:
-            continue  # nothing new in this piece: Cura's lines stay
-        near = cKDTree(theirs).query(points[mine], distance_upper_bound=reach)[0] <= reach
+        decided |= mine
+        theirs = new[contains_xy(grown, new[:, 0], new[:, 1])] if len(new) else new
+        if len(theirs) < 0.5 * np.count_nonzero(mine):
+            continue
         rows = np.flatnonzero(mine)
-        out[rows[near]] = False
+        out[rows[cKDTree(theirs).query(points[rows], distance_upper_bound=reach)[0] <= reach]] = False
+    rows = np.flatnonzero(member & ~decided)
+    if len(rows) and len(new):
+        out[rows[cKDTree(new).query(points[rows], distance_upper_bound=reach)[0] <= reach]] = False
     return out
+
+
+def _samples(paths: list[np.ndarray], step: float) -> np.ndarray:
+    """Points along polylines at most `step` apart, shape (p, 2) mm."""
+    paths = [p for p in paths if len(p) >= 2]
+    if not paths:
+        return np.zeros((0, 2))
+    return sample_segments(np.concatenate([np.stack([p[:-1], p[1:]], axis=1) for p in paths]), step)

@@ -137,3 +137,8 @@ def test_the_message_tells_where_cura_s_infill_was_kept():
                                       warnings=["Cura's lightning infill kept: choose another pattern"]))
     assert "7 layer(s)" in text and "123 mm" in text
     assert text.endswith("Cura's lightning infill kept: choose another pattern.")
+
+
+def test_the_infill_line_multiplier_multiplies_the_density():
+    settings, _ = build_settings(_snapshot([_model("star.stl", density=20, infill_multiplier=2)]))
+    assert settings.density == pytest.approx(0.4) and settings.meshes["star.stl"].density == pytest.approx(0.4)

@@ -175,9 +175,10 @@ def test_a_stub_of_new_infill_does_not_take_over_a_small_island():
     stub = [np.array([[1.0, 1.0], [1.3, 1.0]])]
     kept = kept_cura_pieces(cura, island, stub, LW, reach=5.0)
     assert abs(sum(LineString(k).length for k in kept) - 3.8) < 0.1
-    # in a large piece the same stub takes over what it reaches
+    # nor in a large piece; a real line there takes over what it reaches
     big = box(0, 0, 30, 30)
-    assert kept_cura_pieces(cura, big, stub, LW, reach=5.0) == []
+    assert len(kept_cura_pieces(cura, big, stub, LW, reach=5.0)) > 0
+    assert kept_cura_pieces(cura, big, [np.array([[1.0, 1.0], [2.0, 1.0]])], LW, reach=5.0) == []
 
 
 # ----------------------------------------------------------------------------- end to end
@@ -282,6 +283,8 @@ def test_footer_settings_are_read_as_cura_wrote_them():
     assert footer.infill_pattern() == "grid"
     assert footer.value("layer_height") == "0.2"  # the global value where the extruder has none
     assert not read_footer(";SETTING_3 {broken").found
+    doubled = read_footer(_footer({"infill_sparse_density": "15", "infill_multiplier": "2"}))
+    assert doubled.infill_density() == 0.3  # each line printed twice: twice the material
 
 
 def test_density_from_the_footer_not_from_the_lines():

@@ -63,6 +63,13 @@ def _primary_model(snapshot):
     return models[0] if models else None
 
 
+def _infill_fraction(values: dict) -> float | None:
+    """The density Cura's infill prints at: its density times the infill line multiplier, at most 1."""
+    density = _fraction(values.get("infill_sparse_density"))
+    multiplier = _number(values.get("infill_multiplier"), 1.0) or 1.0
+    return None if density is None else min(1.0, density * max(1.0, multiplier))
+
+
 def build_settings(snapshot):
     """``(ProcessSettings, [Region])`` for the pass, from Cura's values.
 
@@ -83,7 +90,7 @@ def build_settings(snapshot):
     lift = raft_z_offset(snapshot)
     for mesh in snapshot.meshes:
         values = mesh.values
-        density = _fraction(values.get("infill_sparse_density"))
+        density = _infill_fraction(values)
         settings = MeshSettings(
             enabled=bool(mesh.enabled),
             density=density,
@@ -113,7 +120,7 @@ def build_settings(snapshot):
         jerk = _number(primary.values.get("jerk_infill"), jerk)
     flavor = str(glob.get("machine_gcode_flavor") or "")
     settings = ProcessSettings(
-        density=_fraction(primary.values.get("infill_sparse_density")),
+        density=_infill_fraction(primary.values),
         line_width=_number(primary.values.get("infill_line_width")),
         infill_overlap=_number(primary.values.get("infill_overlap_mm")),
         speed=_number(primary.values.get("speed_infill")),

@@ -17,6 +17,7 @@ MESH_KEYS = (
     "delaunay_infill_seed",
     "delaunay_infill_layout",
     "infill_sparse_density",
+    "infill_multiplier",
     "infill_line_width",
     "infill_line_distance",
     "infill_overlap_mm",

@@ -51,9 +51,13 @@ class CuraFooter:
             return None
 
     def infill_density(self, extruder: int = 0) -> float | None:
-        """``infill_sparse_density`` as a fraction."""
+        """The density Cura's infill prints at, a fraction: ``infill_sparse_density`` times the infill
+        line multiplier (each line printed that many times side by side), at most 1."""
         percent = self.number("infill_sparse_density", extruder)
-        return None if percent is None or percent < 0 else percent / 100.0
+        if percent is None or percent < 0:
+            return None
+        multiplier = self.number("infill_multiplier", extruder) or 1.0
+        return min(1.0, percent / 100.0 * max(1.0, multiplier))
 
     def infill_pattern(self, extruder: int = 0) -> str | None:
         return self.value("infill_pattern", extruder)

@@ -96,7 +96,7 @@ def e_per_mm(parse: LayerParse, mask: np.ndarray) -> float | None:
     return float(de[ok].sum() / length[ok].sum())
 
 
-def family_spacings(fill: np.ndarray, line_width: float) -> list[float] | None:
+def family_spacings(fill: np.ndarray, line_width: float, quantile: float = 0.5) -> list[float] | None:
     """Spacing of each family of parallel lines in Cura's FILL, mm; None when the lines form no clear families.
 
     Line patterns (lines, grid, triangles, cubic, ...) print one to four
@@ -108,6 +108,11 @@ def family_spacings(fill: np.ndarray, line_width: float) -> list[float] | None:
         FILL segments, mm.
     line_width : float
         mm.
+    quantile : float
+        Which of a family's gaps between neighbouring lines: the median (its
+        spacing), or a larger one (0.9: the wide gaps, where lines come in
+        groups, as with Cura's infill line multiplier, or spacings differ, as
+        with gradual infill).
     """
     if len(fill) < 4:
         return None
@@ -131,7 +136,7 @@ def family_spacings(fill: np.ndarray, line_width: float) -> list[float] | None:
         gaps = gaps[gaps > 0.5 * line_width]
         if gaps.size < 2:
             return None
-        spacings.append(median_of(gaps))
+        spacings.append(median_of(gaps) if quantile == 0.5 else float(np.quantile(gaps, quantile)))
     return spacings
 
 

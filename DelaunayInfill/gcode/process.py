@@ -973,11 +973,12 @@ class _Run:
         for f in fills:
             if len(f) == 0:
                 continue
-            found = family_spacings(f, lw)
+            found = family_spacings(f, lw, quantile=0.9)
             if found is None:
-                # no families of parallel lines (gyroid, concentric, ...): the spacing their length gives
+                # no families of parallel lines (gyroid, concentric, ...): twice the spacing their length
+                # gives (their lines wander, and a line multiplier doubles the length)
                 d = self._infill_density(f, lw, g.area.area) if not g.area.is_empty else None
-                found = [lw / d] if d else None
+                found = [2.0 * lw / d] if d else None
             if found:
                 spacing = max(spacing or 0.0, *found)
         mask = parse.extruding() & parse.kind_mask(FILL)

@@ -129,10 +129,11 @@ def kept_cura_pieces(
     """Stretches of Cura's FILL lines that the new infill does not take over.
 
     A place of a Cura line is kept when it lies outside `area` (grown by a line
-    width: Cura's lines end at its border), or has no new line within `reach`
+    width: Cura's lines end at its border), or has no new line (of two line
+    widths or more: a clip's stub takes nothing over) within `reach`
     inside the same piece of `area`, or its piece is small (at most `reach`
-    squared) and holds less than half as much new infill as Cura's (an island
-    the pattern barely reaches); places in
+    squared) and holds less than half as much new infill as Cura's, or less
+    than two line widths of it (an island the pattern barely reaches); places in
     `no_infill` (0 % regions) are never kept.  Neighbouring kept places form
     one piece.
 
@@ -210,9 +211,12 @@ def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width
     out = np.ones(len(points), dtype=bool)
     if area is None or area.is_empty:
         return out
-    new = _samples(new_paths, line_width / 2)
+    # a stub a clip leaves (shorter than two line widths) takes nothing over
+    new = _samples([p for p in new_paths if len(p) >= 2 and np.hypot(*np.diff(p, axis=0).T).sum() >= 2 * line_width],
+                   line_width / 2)
     # the points of the area: inside it, or within a line width of it (Cura's lines end at its border)
-    member = contains_xy(area, points[:, 0], points[:, 1])
+    inside = contains_xy(area, points[:, 0], points[:, 1])
+    member = inside.copy()
     rest = np.flatnonzero(~member)
     if len(rest):
         member[rest[distances(points_of(points[rest]), area) <= line_width]] = True
@@ -223,12 +227,14 @@ def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width
         # a small piece with far less new infill than Cura's (an island the pattern barely reaches):
         # Cura's lines stay (points every half line width on both: their counts compare lengths)
         grown = piece.buffer(line_width, 2)
-        mine = member & ~decided & contains_xy(grown, points[:, 0], points[:, 1])
+        # its own points, and those at its border that lie in no piece
+        mine = member & ~decided & (contains_xy(piece, points[:, 0], points[:, 1])
+                                    | (~inside & contains_xy(grown, points[:, 0], points[:, 1])))
         if not mine.any():
             continue
         decided |= mine
         theirs = new[contains_xy(grown, new[:, 0], new[:, 1])] if len(new) else new
-        if len(theirs) < 0.5 * np.count_nonzero(mine):
+        if len(theirs) < max(0.5 * np.count_nonzero(mine), 4):  # (4 points: two line widths of new line)
             continue
         rows = np.flatnonzero(mine)
         out[rows[cKDTree(theirs).query(points[rows], distance_upper_bound=reach)[0] <= reach]] = False

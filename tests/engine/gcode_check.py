@@ -421,14 +421,10 @@ def _lines(segments: np.ndarray) -> MultiLineString:
 
 
 def _sample_points(segments: np.ndarray, step: float) -> np.ndarray:
-    """Points every `step` mm along segments (k, 2, 2) -> (n, 2)."""
-    d = segments[:, 1] - segments[:, 0]
-    length = np.hypot(d[:, 0], d[:, 1])
-    counts = np.maximum(1, np.ceil(length / step).astype(int))
-    seg_idx = np.repeat(np.arange(len(segments)), counts)
-    offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    t = (offsets + 0.5) / counts[seg_idx]
-    return segments[seg_idx, 0] + t[:, None] * d[seg_idx]
+    """Points every `step` mm along segments (k, 2, 2) -> (n, 2): the midpoints of equal pieces."""
+    from .everyday_check import sample_segments
+
+    return sample_segments(segments, step)[0]
 
 
 def check_infill_area(orig: Parsed, new: Parsed, geometry: SliceGeometry, settings: SliceSettings,

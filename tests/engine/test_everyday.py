@@ -49,3 +49,17 @@ def test_everyday(everyday_slices, case, density, version):
             f"{case.name} at {density} % with CuraEngine {version}: {case.exercises}\n"
             f"settings: {case.settings}; slices in {sliced.folder}\n{result.report()}",
             pytrace=False)
+
+
+@pytest.mark.parametrize("case", [pytest.param(case, id=f"{case.name}-20-4.13") for case in CASES])
+def test_everyday_everything_but_the_infill_is_cura_s(everyday_slices, case):
+    """Check 1 of the matrix on the corpus (20 %, CuraEngine 4.13): every non-FILL line the same, move
+    for move, and after every FILL block the machine state Cura's next line expects (E continuity)."""
+    from . import gcode_check as gc
+
+    sliced = _slice(everyday_slices, case, 20, "4.13")
+    processed, _, _ = process_and_check(sliced)
+    with open(sliced.cura_gcode, encoding="utf-8") as f:
+        original = gc.parse_gcode(f.read())
+    result = gc.check_unchanged(original, gc.parse_gcode(processed))
+    assert result.ok, result.report()

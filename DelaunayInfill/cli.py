@@ -27,6 +27,40 @@ def _percent(text: str) -> float:
     return value / 100.0
 
 
+def _flow(text: str) -> float:
+    try:
+        value = float(text.strip().rstrip("%"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a percentage: {text!r}") from None
+    if not (10 <= value <= 300):
+        raise argparse.ArgumentTypeError(f"--flow is the extrusion relative to Cura's infill, 10 to 300 %, got {value:g}")
+    return value / 100.0
+
+
+def _steps(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if not 0 <= value <= 1000:
+        raise argparse.ArgumentTypeError(f"--relax takes 0 to 1000 steps, got {value}")
+    return value
+
+
+def output_problem(path: str) -> str | None:
+    """Why `path` cannot be written as an output file (None: it can), in the CLI's words."""
+    if os.path.isdir(path) or path.endswith(os.sep):
+        return f"{path} is a folder: give a file name (e.g. {os.path.join(path, 'out.gcode')})"
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        return f"the folder {folder} does not exist"
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return f"cannot write into {folder} (no permission)"
+    if os.path.exists(path) and not os.access(path, os.W_OK):
+        return f"cannot overwrite {path} (no permission)"
+    return None
+
+
 def _positive(text: str) -> float:
     try:
         value = float(text)
@@ -101,6 +135,16 @@ def _cmd_process(args) -> int:
     if args.output is not None and args.in_place:
         print("error: -o and --in-place exclude each other", file=sys.stderr)
         return EXIT_REFUSED
+    if not os.path.isfile(args.input):
+        print(f"error: no such file: {args.input}", file=sys.stderr)
+        return EXIT_REFUSED
+    if args.output is not None and os.path.abspath(args.output) == os.path.abspath(args.input):
+        print("error: the output is the input: give --in-place to replace it, or another -o", file=sys.stderr)
+        return EXIT_REFUSED
+    problem = output_problem(args.output or args.input)
+    if problem:
+        print(f"error: {problem}; nothing was written", file=sys.stderr)
+        return EXIT_REFUSED
     try:
         settings = ProcessSettings(
             density=args.density,
@@ -124,22 +168,26 @@ def _cmd_process(args) -> int:
     except (ValueError, argparse.ArgumentTypeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_REFUSED
-    if not os.path.isfile(args.input):
-        print(f"error: no such file: {args.input}", file=sys.stderr)
-        return EXIT_REFUSED
+    if args.density is not None and args.density < 0.01:
+        print(f"warning: --density {args.density * 100:g} is {args.density * 100:g} %; did you mean "
+              f"{args.density * 10000:g} %?", file=sys.stderr)
     big = os.path.getsize(args.input) > 5_000_000
     progress = _Progress(f"processing {os.path.basename(args.input)}", enabled=not args.quiet and (big or sys.stderr.isatty()))
+    # --in-place --verify: the result goes next to the input first, is checked against it, then replaces it
+    target = args.output
+    if args.in_place and args.verify:
+        target = os.path.join(os.path.dirname(os.path.abspath(args.input)),
+                              f".{os.path.basename(args.input)}.delaunay-verify.gcode")
     try:
-        report = process_file(
-            args.input, args.output, settings, regions=regions, in_place=args.in_place, progress=progress
-        )
+        report = process_file(args.input, target, settings, regions=regions, in_place=args.in_place and target is None,
+                              progress=progress, write_unchanged=False, keep_going=args.keep_going)
     except GCodeError as exc:
         progress.done()
         print(f"error: {args.input}: {exc}; nothing was written", file=sys.stderr)
         return EXIT_REFUSED
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError, OSError) as exc:
         progress.done()
-        print(f"error: {exc}; nothing was written", file=sys.stderr)
+        print(f"error: {getattr(exc, 'strerror', None) or exc}; nothing was written", file=sys.stderr)
         return EXIT_REFUSED
     progress.done()
     if report.already_processed:
@@ -148,18 +196,61 @@ def _cmd_process(args) -> int:
     out = args.input if args.in_place else args.output
     if not args.quiet:
         print(report.format_table())
-        print(f"wrote {out}")
+    for warning in _hints(report, args):
+        print(f"warning: {warning}", file=sys.stderr)
+    if report.failed_layers and not args.keep_going:
+        if args.quiet:
+            print(f"error: {len(report.failed_layers)} layer(s) could not be processed "
+                  f"({'; '.join(report.failure_messages[:3])})", file=sys.stderr)
+        print("error: nothing was written (--keep-going writes the file with Cura's infill in those layers)",
+              file=sys.stderr)
+        return EXIT_ERROR
+    if not report.written:
+        print("nothing was changed, so nothing was written", file=sys.stderr)
+        return EXIT_ERROR
     if args.verify:
         from .gcode.verify import verify_files
 
-        check = verify_files(args.input if not args.in_place else out, out, flow=settings.flow) if not args.in_place else None
-        if check is not None:
-            print(check.summary())
-            for problem in check.problems:
-                print(f"  - {problem}")
-            if not check.ok:
-                return EXIT_ERROR
+        check = verify_files(args.input, target if args.in_place else out, flow=settings.flow)
+        print(check.summary())
+        for problem in check.problems:
+            print(f"  - {problem}")
+        if not check.ok:
+            if args.in_place:
+                os.unlink(target)
+                print(f"error: {args.input} was left as it was", file=sys.stderr)
+            return EXIT_ERROR
+        if args.in_place:
+            os.replace(target, args.input)
+    if not args.quiet:
+        print(f"wrote {out}")
     return EXIT_OK
+
+
+def _hints(report, args) -> list[str]:
+    """What the user should know of a run that did less than asked, with what to do."""
+    hints = []
+    if args.modifier:
+        for region in report.regions:
+            if region.name.startswith(("base", "mesh ")):
+                continue
+            if not region.area_mm2 > 0:
+                hints.append(f"the region {region.name} touches no infill: is it placed in G-code coordinates? "
+                             "--modifier-offset 110,110 moves an STL to the centre of a 220 mm bed, where "
+                             "CuraEngine puts a model's origin")
+    known = set(report.meshes)
+    for name, _ in args.mesh:
+        if name not in known and os.path.basename(name) not in {os.path.basename(m) for m in known}:
+            shown = ", ".join(sorted(known)) or "none"
+            hints.append(f"--mesh {name}: no such ;MESH: in the file (its meshes: {shown})")
+    if args.line_width is not None and report.line_width_found and not (
+            0.67 <= args.line_width / report.line_width_found <= 1.5):
+        hints.append(f"--line-width {args.line_width:g} mm is far from the file's own {report.line_width_found:.2g} mm "
+                     "(its walls): the infill will extrude that much more or less per line")
+    if report.layers_total and not report.infill_before_mm:
+        hints.append("the file has no infill (;TYPE:FILL) to replace: was it sliced with 0 % infill? Slice it "
+                     "with some infill density; Delaunay infill replaces Cura's")
+    return hints
 
 
 # --------------------------------------------------------------------------- preview
@@ -176,6 +267,10 @@ def _cmd_preview(args) -> int:
             print(f"error: no such file: {path}", file=sys.stderr)
             return EXIT_REFUSED
     out = args.output or f"{os.path.splitext(os.path.basename(args.input))[0]}_layer{args.layer}.png"
+    problem = output_problem(out)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return EXIT_REFUSED
     try:
         render_layer(args.input, args.layer, out, before=args.before, occurrence=args.occurrence, window=args.window)
     except ValueError as exc:
@@ -232,12 +327,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--layout", choices=("seamless", "paper"), default="seamless",
                    help="seamless: one triangulation across regions (default); paper: one per convex part")
-    p.add_argument("--flow", type=_percent, metavar="PCT", help="extrusion relative to Cura's infill (default 100)")
+    p.add_argument("--flow", type=_flow, metavar="PCT", help="extrusion relative to Cura's infill, 10-300 (default 100)")
     p.add_argument("--speed", type=_positive, metavar="MM_S", help="infill speed (default: Cura's)")
-    p.add_argument("--relax", type=int, default=0, help="relaxation steps (default 0)")
+    p.add_argument("--relax", type=_steps, default=0, help="relaxation steps (default 0)")
     p.add_argument("--no-combing", action="store_true",
                    help="retract on a travel that leaves the part instead of going round inside it")
-    p.add_argument("--verify", action="store_true", help="check the output against the input afterwards")
+    p.add_argument("--verify", action="store_true", help="check the output against the input afterwards "
+                   "(with --in-place: before it replaces the input)")
+    p.add_argument("--keep-going", action="store_true",
+                   help="write the output even when some layers fail (they keep Cura's infill)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress line or summary")
     p.set_defaults(func=_cmd_process)
 

@@ -183,7 +183,7 @@ def write_figures(out_dir: Path, seed: int = 0, table: Path | None = None) -> st
     cal = calibration_rows(seed=seed)
     qual = quality_rows(seed=seed)
     lines = ["# Figures and measured densities", "",
-             "Printed by `delaunay-infill figures -o docs/images --table docs/figures.md`.", ""]
+             "Printed by `delaunay-infill figures -o docs/images --table docs/figures.md` (in the repository).", ""]
     lines += ["## Figure 2: 400 x 400 mm square, 1.2 mm lines", "",
               "| target | measured (ours) | measured with Formula (6) | samples | seconds |", "|---|---|---|---|---|"]
     lines += [f"| {r['target']:.0%} | {r['ours']:.2%} | {r['paper']:.2%} | {r['samples']} | {r['seconds']:.2f} |" for r in f2]
@@ -217,14 +217,31 @@ def write_figures(out_dir: Path, seed: int = 0, table: Path | None = None) -> st
 
 def register_cli(subparsers) -> None:
     """Add ``figures`` to the ``delaunay-infill`` command line."""
-    p = subparsers.add_parser("figures", help="redraw the paper's Figures 2 and 10 with measured densities")
-    p.add_argument("-o", "--out", default="docs/images", help="output folder (default docs/images)")
-    p.add_argument("--table", default=None, help="markdown tables (default OUT/figures.md)")
-    p.add_argument("--seed", type=int, default=0)
+    p = subparsers.add_parser(
+        "figures", help="redraw the paper's Figures 2 and 10 with measured densities",
+        description="Redraw the paper's Figure 2 (10, 40, 80 %% on a square) and Figure 10 (the star's six "
+        "regions, both layouts) with the densities measured, and print the calibration tables as markdown.")
+    p.add_argument("-o", "--out", default="figures", help="output folder, made when missing (default ./figures)")
+    p.add_argument("--table", default=None, help="markdown tables file (default OUT/figures.md)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the patterns (default 0)")
     p.set_defaults(func=_run)
 
 
 def _run(args) -> int:
-    text = write_figures(Path(args.out), seed=args.seed, table=Path(args.table) if args.table else None)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        print(f"error: {out} is a file: give a folder with -o", file=sys.stderr)
+        return 2
+    table = Path(args.table) if args.table else out / "figures.md"
+    if not table.parent.is_dir() and table.parent != out:
+        print(f"error: the folder {table.parent} does not exist", file=sys.stderr)
+        return 2
+    try:
+        text = write_figures(out, seed=args.seed, table=table)
+    except OSError as exc:
+        print(f"error: cannot write into {out}: {exc.strerror}", file=sys.stderr)
+        return 2
     sys.stdout.write(text)
+    for name in (out / "figure2.png", out / "figure10.png", table):
+        print(f"wrote {name}", file=sys.stderr)
     return 0

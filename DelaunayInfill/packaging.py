@@ -140,6 +140,9 @@ def _atomic_zip(path: Path, entries) -> None:
                 info.compress_type = zipfile.ZIP_DEFLATED
                 info.external_attr = 0o644 << 16
                 archive.writestr(info, data)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(temp, 0o666 & ~umask)  # mkstemp makes 0600: give the package the mode a new file gets
         os.replace(temp, path)
     except BaseException:
         os.unlink(temp)

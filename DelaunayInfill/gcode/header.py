@@ -39,6 +39,7 @@ def patch_header(
     e_delta: dict,
     settings: ProcessSettings,
     volumetric: bool = False,
+    layers: tuple[int, int, int] | None = None,
 ) -> str:
     """Header with updated time and filament figures and the processed marker.
 
@@ -55,6 +56,8 @@ def patch_header(
         For the filament diameter and the marker.
     volumetric : bool
         E is mm³ (UltiGCode, RepRap volumetric).
+    layers : (int, int, int), optional
+        Layers processed, kept as Cura's, failed: written into the marker.
 
     Notes
     -----
@@ -109,6 +112,8 @@ def patch_header(
     marker = (
         f"{MARKER} version={__version__} layout={settings.layout} seed={settings.seed}"
         + (f" density={settings.density * 100:g}%" if settings.density is not None else "")
+        # how many layers got Delaunay infill, kept Cura's (nothing to replace), failed (kept Cura's)
+        + (f" layers_processed={layers[0]} layers_kept={layers[1]} layers_failed={layers[2]}" if layers else "")
     )
     m = re.search(r"^;Generated with", header, re.M)
     if m:

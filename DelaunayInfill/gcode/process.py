@@ -70,6 +70,7 @@ __all__ = [
 ]
 
 _TIME_ELAPSED = re.compile(r"^;TIME_ELAPSED:(-?[\d.]+)", re.M)
+_MESH_LINE = re.compile(r"^;MESH:(.*?)\s*$", re.M)
 _M204 = re.compile(r"^M204 [^\n;]*?S(\d+\.?\d*)", re.M)
 _DEFAULT_LINE_WIDTH = 0.4
 _RETRACT_TRAVEL_MM = 40.0  # a retraction and prime take about as long as this much travel
@@ -90,8 +91,11 @@ class Survey:
     layer_chunks: int = 0
     acceleration: float | None = None
     last_time_elapsed: float | None = None
+    meshes: set = field(default_factory=set)  # the ;MESH: names (NONMESH left out)
 
     def add(self, text: str, index: int) -> None:
+        if ";MESH:" in text:
+            self.meshes.update(name for name in _MESH_LINE.findall(text) if name != "NONMESH")
         if index == 0:
             self.first_chunk = text
         self.last_chunk = text
@@ -401,10 +405,14 @@ class _Run:
                 "infill pattern (grid, for one) in Cura to have it replaced")
         self.lw_warned = False
         self.any_lw: float | None = None
+        self.measured_lw: float | None = None
 
     # ------------------------------------------------------------------ helpers
     def _line_width(self, parse: LayerParse, mesh: str) -> float:
         ms = self.s.mesh(mesh)
+        if self.measured_lw is None and _has_both_walls(parse, mesh) and parse.number is not None and parse.number >= 1:
+            # the file's own width, for the report (an override far from it is worth a word)
+            self.measured_lw = wall_line_width(parse, mesh) or None
         if ms is not None and ms.line_width:
             return ms.line_width
         if self.s.line_width:
@@ -1213,6 +1221,8 @@ class _Run:
     # ------------------------------------------------------------------ header
     def finish(self, header: str) -> str:
         r = self.report
+        r.meshes = sorted(self.survey.meshes)
+        r.line_width_found = self.measured_lw
         before = sum(self.e_before.values())
         r.filament_before_mm = before
         r.filament_after_mm = before + sum(self.e_delta.values())
@@ -1225,7 +1235,8 @@ class _Run:
                 continue  # regions tile the whole part: no base zone to report
             measured = t.length / t.area if t.area > 1e-9 else float("nan")
             r.regions.append(RegionReport(name, t.target, measured, t.area))
-        return patch_header(header, self.time_delta, self.e_before, self.e_delta, self.s, volumetric=self.info.volumetric)
+        return patch_header(header, self.time_delta, self.e_before, self.e_delta, self.s, volumetric=self.info.volumetric,
+                            layers=(r.layers_processed, r.layers_kept, len(r.failed_layers)))
 
 
 def _block_rate(parse: LayerParse, moves: np.ndarray, mesh: str, fill: np.ndarray, rates: dict) -> float | None:
@@ -1343,6 +1354,7 @@ def process_gcode(
         if progress is not None and (i % 16 == 0 or i == total - 1):
             progress((i + 1) / total)
     out[0] = run.finish(out[0])
+    run.report.written = True
     if len(out) != len(layers):
         # The caller's list was not split at layers: hand back one string per chunk (still Cura's form).
         pass
@@ -1359,13 +1371,17 @@ def process_file(
     in_place: bool = False,
     progress: Callable[[float], None] | None = None,
     cancel: Callable[[], bool] | None = None,
+    write_unchanged: bool = True,
+    keep_going: bool = True,
 ) -> ProcessReport:
     """Process a G-code file, streaming layer by layer; write `out_path` atomically.
 
     The body goes to a temporary file first; then header (with the new totals)
     and body are written to a temporary file next to `out_path` and renamed over
     it.  Nothing is written when the input is refused, already processed, or
-    processing raises.
+    processing raises; nor when no layer was processed and `write_unchanged`
+    is False, nor when a layer failed and `keep_going` is False
+    (``report.written`` says which).
 
     Raises
     ------
@@ -1395,7 +1411,7 @@ def process_file(
             with open(in_path, encoding="utf-8", newline="") as f:
                 yield from iter_file_chunks(f)
         except UnicodeDecodeError as exc:
-            raise GCodeError(f"{in_path} is not a text G-code file ({exc.reason} at byte {exc.start})") from None
+            raise GCodeError(f"not a text G-code file ({exc.reason} at byte {exc.start})") from None
 
     survey = Survey()
     for i, chunk in enumerate(chunks()):
@@ -1423,6 +1439,9 @@ def process_file(
                 if progress is not None and i % 32 == 0:
                     progress(min(1.0, done / size))
         header_out = run.finish(header_out or "")
+        if (not write_unchanged and run.report.layers_processed == 0) or (not keep_going and run.report.failed_layers):
+            run.report.seconds = time.perf_counter() - t0
+            return run.report  # (the body's temporary file goes below)
         final_fd, final_path = tempfile.mkstemp(prefix=".delaunay-out-", suffix=".gcode", dir=out_dir)
         with os.fdopen(final_fd, "w", encoding="utf-8", newline="") as out, open(body_path, encoding="utf-8", newline="") as body:
             out.write(header_out)
@@ -1436,6 +1455,7 @@ def process_file(
             os.chmod(final_path, 0o666 & ~_umask())
         os.replace(final_path, out_path)
         final_path = None
+        run.report.written = True
     finally:
         if os.path.exists(body_path):
             os.unlink(body_path)

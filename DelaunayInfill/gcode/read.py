@@ -61,6 +61,7 @@ SKIN = TYPE_CODES["SKIN"]
 _MOVE_COLUMNS = ("line", "x0", "y0", "z0", "x1", "y1", "z1", "de", "f", "kind", "mesh", "block", "ext")
 _PARAM = re.compile(r"([XYZEF])\s*(-?\d*\.?\d+)")
 _LAYER_LINE = re.compile(r"^;LAYER:(-?\d+)", re.M)
+_ENGINE_ENDS = re.compile(r"(?:Cura_SteamEngine|CuraEngine)\s*(?:[4-9]|\d\d)\.")  # versions that write ;End of Gcode
 
 
 class GCodeError(ValueError):
@@ -263,6 +264,9 @@ def check_cura_gcode(first_chunk: str, last_chunk: str, layer_count: int) -> Hea
         raise GCodeError("no ';LAYER:' lines: the G-code has no layers")
     if ";TIME_ELAPSED:" not in last_chunk and ";End of Gcode" not in last_chunk:
         raise GCodeError("the G-code looks truncated: the last layer has no ';TIME_ELAPSED:' line")
+    if ";End of Gcode" not in last_chunk and ";End of Gcode" not in first_chunk and _ENGINE_ENDS.search(info.generator):
+        # CuraEngine 4 and 5 end every file with this line, after the end G-code
+        raise GCodeError("the G-code looks truncated: it ends without CuraEngine's ';End of Gcode' line")
     return info
 
 

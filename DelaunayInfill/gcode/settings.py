@@ -84,6 +84,8 @@ class ProcessSettings:
             raise ValueError(f"jerk must be a speed >= 0 mm/s, got {self.jerk}")
         if not (math.isfinite(self.feather) and self.feather >= 0.0):
             raise ValueError(f"feather must be a width >= 0 mm, got {self.feather}")
+        if not (isinstance(self.relax, int) and 0 <= self.relax <= 1000):
+            raise ValueError(f"relax must be a whole number of steps, 0 to 1000, got {self.relax}")
         if self.layout not in ("seamless", "paper"):
             raise ValueError(f"layout must be 'seamless' or 'paper', got {self.layout!r}")
         for name, ms in self.meshes.items():
@@ -211,6 +213,9 @@ class ProcessReport:
     cura_infill_kept_mm: float = 0.0
     layers_with_cura_infill_kept: int = 0
     already_processed: bool = False
+    written: bool = False  # the output was written (process_file), or the list returned (process_gcode)
+    meshes: list[str] = field(default_factory=list)  # the file's ;MESH: names
+    line_width_found: float | None = None  # the line width read from the walls, mm
     volumetric: bool = False
     seconds: float = 0.0
     warnings: list[str] = field(default_factory=list)
@@ -233,8 +238,12 @@ class ProcessReport:
             return f"{s // 3600}h{s % 3600 // 60:02d}m{s % 60:02d}s"
 
         rows = [
-            ("layers", f"{self.layers_total}", f"{self.layers_processed} processed", f"{self.layers_kept} kept, {len(self.failed_layers)} failed"),
-            ("  repeats", "", f"{self.layers_repeated} layers", "written from an earlier one"),
+            ("layers", f"{self.layers_total}", f"{self.layers_processed} processed",
+             f"{self.layers_kept} as Cura's" + (f", {len(self.failed_layers)} FAILED" if self.failed_layers else "")),
+        ]
+        if self.layers_repeated:
+            rows.append(("  repeats", "", f"{self.layers_repeated} layers", "written from an earlier one"))
+        rows += [
             ("FILL blocks", "", f"{self.blocks_replaced} replaced", f"{self.blocks_kept} kept as Cura's"),
             (f"filament ({unit})", f"{self.filament_before_mm:.1f}", f"{self.filament_after_mm:.1f}", pct(self.filament_after_mm, self.filament_before_mm)),
             ("print time", hms(self.time_before_s), hms(self.time_after_s), pct(self.time_after_s, self.time_before_s)),

@@ -120,14 +120,19 @@ def test_6_failed_layers_keep_cura_infill_and_are_reported(hbracket, injected_fa
 
 def test_6_cli_tells_the_user_about_failed_layers(hbracket, tmp_path):
     out = tmp_path / "out.gcode"
-    proc = subprocess.run([sys.executable, "-c", _INJECT.format(layers=set(FAIL_LAYERS)), "process", hbracket.gcode,
-                           "-o", str(out)], capture_output=True, text=True, timeout=300)
+    command = [sys.executable, "-c", _INJECT.format(layers=set(FAIL_LAYERS)), "process", hbracket.gcode, "-o", str(out)]
+    # failed layers: exit 1 and nothing written, unless the user asks to keep going
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1 and not out.exists(), (proc.returncode, proc.stderr)
+    assert "--keep-going" in proc.stderr
+    proc = subprocess.run([*command, "--keep-going"], capture_output=True, text=True, timeout=300)
     text = proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr, proc.stderr
-    assert out.exists()
+    assert proc.returncode == 0 and out.exists()
     assert "fail" in text.lower()
     for number in FAIL_LAYERS:
         assert re.search(rf"\b{number}\b", text), f"layer {number} not reported:\n{text}"
+    assert f"layers_failed={len(FAIL_LAYERS)}" in out.read_text()  # the marker says so
 
 
 def test_6_input_is_never_modified_without_in_place(hbracket, tmp_path):

@@ -19,14 +19,6 @@ from DelaunayInfill.models import box, write_stl
 DATA = os.path.join(os.path.dirname(__file__), "..", "DelaunayInfill", "data")
 
 
-@pytest.fixture()
-def star_gcode(tmp_path):
-    path = tmp_path / "star.gcode"
-    with gzip.open(os.path.join(DATA, "star.gcode.gz"), "rb") as src, open(path, "wb") as dst:
-        shutil.copyfileobj(src, dst)
-    return path
-
-
 def test_process_writes_output_and_summary(star_gcode, tmp_path, capsys):
     out = tmp_path / "out.gcode"
     before = star_gcode.read_bytes()

@@ -7,7 +7,6 @@ written or the input changed.
 
 from __future__ import annotations
 
-import gzip
 import os
 import re
 import shutil
@@ -36,11 +35,8 @@ def quiet_failure(proc: subprocess.CompletedProcess, status: int, words: str) ->
 
 
 @pytest.fixture()
-def star(tmp_path):
-    path = tmp_path / "star.gcode"
-    with gzip.open(os.path.join(DATA, "star.gcode.gz"), "rb") as src, open(path, "wb") as dst:
-        shutil.copyfileobj(src, dst)
-    return path
+def star(star_gcode):
+    return star_gcode
 
 
 def _nothing_new(folder, *keep) -> None:

@@ -98,36 +98,77 @@ def _window(text: str) -> tuple[float, float, float, float]:
     return x0, y0, x1, y1
 
 
-class _Progress:
-    """One updating progress line on stderr for long runs."""
+class Progress:
+    """Progress of a long run on stderr: a bar on a terminal, plain periodic lines elsewhere.
 
-    def __init__(self, label: str, enabled: bool):
+    Nothing shows for a run shorter than `after` seconds.  On a terminal one line is redrawn
+    (``\\r``) at most every 0.2 s; in a log (not a terminal) a plain line is written every
+    `every` seconds, so logs get no carriage returns.
+    """
+
+    BAR = 30  # characters
+
+    def __init__(self, label: str, enabled: bool, stream=None, clock=time.perf_counter,
+                 after: float | None = None, every: float = 10.0):
         self.label = label
         self.enabled = enabled
-        self.start = time.perf_counter()
+        self.stream = stream if stream is not None else sys.stderr
+        self.clock = clock
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        env_after = os.environ.get("DELAUNAY_INFILL_PROGRESS_AFTER")
+        self.after = after if after is not None else float(env_after) if env_after else 2.0
+        self.every = every
+        self.start = clock()
         self.shown = False
-        self.last = 0.0
+        self.finished = False
+        self.last = -1e9
 
     def __call__(self, fraction: float) -> None:
-        now = time.perf_counter()
-        if not self.enabled or now - self.start < 1.0 or (now - self.last < 0.5 and fraction < 1.0):
+        if not self.enabled:
             return
+        now = self.clock()
+        elapsed = now - self.start
+        if elapsed < self.after or (now - self.last < (0.2 if self.tty else self.every) and fraction < 1.0):
+            return
+        if fraction >= 1.0 and self.finished:
+            return  # 100 % once
+        self.finished = fraction >= 1.0
         self.last = now
         self.shown = True
-        elapsed = now - self.start
+        fraction = min(max(fraction, 0.0), 1.0)
         eta = elapsed / fraction - elapsed if fraction > 0 else 0.0
-        sys.stderr.write(f"\r{self.label}: {fraction * 100:5.1f} %  ({elapsed:.0f} s, about {eta:.0f} s left)   ")
-        sys.stderr.flush()
+        timing = f"{elapsed:.0f} s, about {eta:.0f} s left" if fraction < 1.0 else f"{elapsed:.0f} s"
+        if self.tty:
+            filled = int(round(fraction * self.BAR))
+            bar = "#" * filled + "." * (self.BAR - filled)
+            self.stream.write(f"\r{self.label} [{bar}] {fraction * 100:3.0f} %  {timing}   ")
+        else:
+            self.stream.write(f"{self.label}: {fraction * 100:.0f} % ({timing})\n")
+        self.stream.flush()
 
     def done(self) -> None:
-        if self.shown:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
+        if self.shown and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+        self.shown = False
 
 
 # --------------------------------------------------------------------------- process
+def modifier_regions(specs: list[str], offset) -> list:
+    """`--modifier FILE.stl:PCT` values as density regions (ValueError in the CLI's words)."""
+    from .gcode import Region
+
+    regions = []
+    for spec in specs:
+        path, pct = _named_percent(spec)
+        if not os.path.isfile(path):
+            raise ValueError(f"modifier STL not found: {path}")
+        regions.append(Region.from_stl(path, pct, offset=offset))
+    return regions
+
+
 def _cmd_process(args) -> int:
-    from .gcode import GCodeError, MeshSettings, ProcessSettings, Region, process_file
+    from .gcode import GCodeError, MeshSettings, ProcessSettings, process_file
 
     if args.output is None and not args.in_place:
         print("error: give -o OUT.gcode, or --in-place to replace the input", file=sys.stderr)
@@ -159,20 +200,14 @@ def _cmd_process(args) -> int:
         )
         settings.validate()
         offset = args.modifier_offset or (0.0, 0.0, 0.0)
-        regions = []
-        for spec in args.modifier:
-            path, pct = _named_percent(spec)
-            if not os.path.isfile(path):
-                raise ValueError(f"modifier STL not found: {path}")
-            regions.append(Region.from_stl(path, pct, offset=offset))
+        regions = modifier_regions(args.modifier, offset)
     except (ValueError, argparse.ArgumentTypeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_REFUSED
     if args.density is not None and args.density < 0.01:
         print(f"warning: --density {args.density * 100:g} is {args.density * 100:g} %; did you mean "
               f"{args.density * 10000:g} %?", file=sys.stderr)
-    big = os.path.getsize(args.input) > 5_000_000
-    progress = _Progress(f"processing {os.path.basename(args.input)}", enabled=not args.quiet and (big or sys.stderr.isatty()))
+    progress = Progress(f"processing {os.path.basename(args.input)}", enabled=not args.quiet)
     # --in-place --verify: the result goes next to the input first, is checked against it, then replaces it
     target = args.output
     if args.in_place and args.verify:
@@ -272,7 +307,13 @@ def _cmd_preview(args) -> int:
         print(f"error: {problem}", file=sys.stderr)
         return EXIT_REFUSED
     try:
-        render_layer(args.input, args.layer, out, before=args.before, occurrence=args.occurrence, window=args.window)
+        regions = modifier_regions(args.modifier, args.modifier_offset or (0.0, 0.0, 0.0))
+    except (ValueError, argparse.ArgumentTypeError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+    try:
+        render_layer(args.input, args.layer, out, before=args.before, occurrence=args.occurrence, window=args.window,
+                     regions=regions)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_REFUSED
@@ -347,6 +388,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--before", metavar="ORIGINAL.gcode", help="draw this file's layer beside it for comparison")
     p.add_argument("--occurrence", type=int, default=0, help="which layer N when numbers repeat (one-at-a-time)")
     p.add_argument("--window", type=_window, metavar="X0,Y0,X1,Y1", help="zoom to this part of the bed (mm)")
+    p.add_argument("--modifier", action="append", default=[], metavar="FILE.stl:PCT",
+                   help="draw this density region's outline at the layer (as given to process); repeatable")
+    p.add_argument("--modifier-offset", type=_offset, metavar="X,Y[,Z]",
+                   help="shift modifier STLs into G-code coordinates, as for process")
     p.set_defaults(func=_cmd_preview)
 
     p = sub.add_parser("demo", help="run the bundled demo (star with the paper's Figure 10 densities, H-bracket)",

@@ -2,12 +2,14 @@
 # The whole test suite, installing what it needs (the README's test command; .ci/run calls it).
 #
 #   bash scripts/test.sh            all tiers
-#   bash scripts/test.sh unit       unit + property tests only (three dependency sets)
+#   bash scripts/test.sh unit       unit + property tests only (four dependency sets)
 #
 # Tiers:
-#   unit    pytest tests/ (not engine, not gui) on three dependency sets:
-#           current pins, and the oldest pins Cura brings that have Python 3.11 wheels
-#           (numpy 1.23.5, scipy 1.9.3, with shapely 1.8.5 and with shapely 2.0.1)
+#   unit    pytest tests/ (not engine, not gui) on four dependency sets:
+#           current pins, the oldest pins Cura brings that have Python 3.11 wheels
+#           (numpy 1.23.5, scipy 1.9.3, with shapely 1.8.5 and with shapely 2.0.1), and the
+#           newest: the trixie chroot's Python 3.13 / numpy 2.2 / scipy 1.15 / shapely 2.1
+#           (scripts/unit_newest.sh; the chroot is built by scripts/cura5_chroot.sh)
 #   engine  tests/engine: real CuraEngine 4.13 slices (and 5.0 in a trixie chroot,
 #           scripts/cura5_chroot.sh), processed and checked independently
 #   gui     tests/gui: the real Cura 4.13 under Xvfb loads the plugin, slices, saves
@@ -76,16 +78,18 @@ run_pytest unit-oldest-shapely18 oldest-shapely18 "${UNIT[@]}"
 make_venv oldest-shapely20 "${OLDEST_S20[@]}" "${TEST_DEPS[@]}" "matplotlib<3.9" || FAILED_STEPS+=("venv oldest-shapely20")
 run_pytest unit-oldest-shapely20 oldest-shapely20 "${UNIT[@]}"
 
+# Cura 5.0, CuraEngine 5.0 and the newest Python stack (3.13, numpy 2.2, scipy 1.15, shapely 2.1) live in
+# a Debian trixie chroot (Debian 12 has Cura 4.13 only): build or refresh it (2-4 minutes the first
+# time, about a second after that). The unit tier runs on its Python; the engine tier slices with both
+# engines; the Cura 5.0 GUI tier runs there.
+SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
+log "trixie chroot with Cura 5.0 and CuraEngine 5.0 (scripts/cura5_chroot.sh)"
+$SUDO bash scripts/cura5_chroot.sh || FAILED_STEPS+=("cura5_chroot.sh (Cura 5.0 chroot)")
+log "pytest [unit-newest] on the chroot's Python 3.13 (scripts/unit_newest.sh)"
+$SUDO bash scripts/unit_newest.sh "$RESULTS/unit-newest.xml" "${UNIT[@]}" || FAILED_STEPS+=("unit-newest (exit $?)")
+
 if [ "$WHAT" = all ]; then
   need_apt cura-engine cura xvfb xauth imagemagick python3-zeroconf python3-pip iproute2 || FAILED_STEPS+=("apt-get install")
-  # CuraEngine 5.0 lives in a Debian trixie chroot (Debian 12 has 4.13 only): build or refresh it
-  # (2-4 minutes the first time, about a second after that); the engine tier slices with both
-  log "trixie chroot with CuraEngine 5.0 (scripts/cura5_chroot.sh)"
-  if [ "$(id -u)" = 0 ]; then
-    bash scripts/cura5_chroot.sh || FAILED_STEPS+=("cura5_chroot.sh (CuraEngine 5.0 chroot)")
-  else
-    sudo bash scripts/cura5_chroot.sh || FAILED_STEPS+=("cura5_chroot.sh (CuraEngine 5.0 chroot)")
-  fi
   # tests/engine and the real-CuraEngine tests beside the unit tests (marked engine, left out above)
   run_pytest engine current tests -m engine --ignore=tests/gui
   run_pytest gui current tests/gui

@@ -189,3 +189,120 @@ def test_figures_refuses_a_file_as_its_folder(tmp_path):
     quiet_failure(run("figures", "-o", tmp_path / "out", "--table", tmp_path / "missing" / "t.md"), 2,
                   "does not exist")
     assert not (tmp_path / "out").exists()
+
+
+def test_the_summary_says_what_happened_to_each_layer(star, tmp_path):
+    import sys
+
+    out = tmp_path / "o.gcode"
+    proc = subprocess.run([sys.executable, "-c", _FAILING, "process", str(star), "-o", str(out), "--keep-going"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    layers = re.search(r"^layers (\d+): (\d+) processed, (\d+) left as Cura's \(no infill to replace\), "
+                       r"(\d+) kept Cura's infill after a FAILURE$", proc.stdout, re.M)
+    assert layers, proc.stdout
+    total, processed, left, failed = map(int, layers.groups())
+    assert failed == 1 and processed > 30 and total == processed + left + failed
+    assert "written from an earlier layer" not in proc.stdout  # no repeats: none is claimed
+
+
+def test_the_summary_names_regions_by_file_and_gives_areas_per_layer(star, tmp_path):
+    folder = tmp_path / "a folder with a long name that used to fill the column"
+    folder.mkdir()
+    stl = folder / "dense.stl"
+    write_stl(stl, box(12, 12, 30, 110, 112))
+    proc = run("process", star, "-o", tmp_path / "o.gcode", "--modifier", f"{stl}:60")
+    assert proc.returncode == 0, proc.stderr
+    row = re.search(r"^dense\.stl\s+60\.0 %\s+([\d.]+) %\s+(\d+)\s+(\d+)$", proc.stdout, re.M)
+    assert row, proc.stdout
+    measured, per_layer, layers = float(row[1]), int(row[2]), int(row[3])
+    assert abs(measured - 60) <= 2
+    assert 100 <= per_layer <= 144 and layers == 42  # one layer's share of a 12 x 12 mm box, not a sum
+    assert "mm2 per layer" in proc.stdout
+
+
+def test_progress_goes_to_logs_as_plain_lines(star, tmp_path):
+    env = dict(os.environ, DELAUNAY_INFILL_PROGRESS_AFTER="0")
+    exe = shutil.which("delaunay-infill")
+    proc = subprocess.run([exe, "process", str(star), "-o", str(tmp_path / "o.gcode")], capture_output=True,
+                          text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("processing star.gcode:")]
+    assert lines and lines[-1].startswith("processing star.gcode: 100 %"), proc.stderr
+    assert "\r" not in proc.stderr
+    assert sum("100 %" in ln for ln in lines) == 1
+
+
+class _Clock:
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+
+class _Terminal:
+    def __init__(self):
+        self.text = ""
+
+    def write(self, text):
+        self.text += text
+
+    def flush(self):
+        pass
+
+    def isatty(self):
+        return True
+
+
+def test_progress_waits_two_seconds_then_a_line_every_ten_in_a_log():
+    import io
+
+    from DelaunayInfill.cli import Progress
+
+    clock, log = _Clock(), io.StringIO()
+    progress = Progress("processing x.gcode", enabled=True, stream=log, clock=clock)
+    for step in range(1, 301):  # a 30 s run, called every 0.1 s
+        clock.now = step * 0.1
+        progress(step / 300)
+    progress(1.0)
+    progress.done()
+    lines = log.getvalue().splitlines()
+    assert lines[0].startswith("processing x.gcode: 7 % (2 s, about 28 s left)"), lines
+    assert len(lines) == 4 and lines[-1] == "processing x.gcode: 100 % (30 s)", lines  # 2, 12, 22 s and the end
+
+
+def test_progress_draws_a_bar_on_a_terminal_and_nothing_for_a_short_run():
+    from DelaunayInfill.cli import Progress
+
+    clock, terminal = _Clock(), _Terminal()
+    progress = Progress("p", enabled=True, stream=terminal, clock=clock)
+    clock.now = 1.9
+    progress(0.95)
+    assert terminal.text == ""  # under two seconds: nothing
+    clock.now = 3.0
+    progress(0.5)
+    progress.done()
+    assert terminal.text.startswith("\rp [###############...............]  50 %") and terminal.text.endswith("\n")
+
+
+def test_preview_draws_region_outlines_and_keeps_titles_on_the_canvas(star, tmp_path):
+    import matplotlib.image  # a test dependency
+
+    stl = tmp_path / "dense.stl"
+    write_stl(stl, box(12, 12, 30, 110, 112))
+    long_name = tmp_path / ("a" * 70 + ".gcode")
+    shutil.copy(star, long_name)
+    plain, with_region = tmp_path / "plain.png", tmp_path / "region.png"
+    assert run("preview", long_name, "--layer", "20", "-o", plain).returncode == 0
+    proc = run("preview", long_name, "--layer", "20", "-o", with_region, "--modifier", f"{stl}:60")
+    assert proc.returncode == 0, proc.stderr
+    a, b = matplotlib.image.imread(plain), matplotlib.image.imread(with_region)
+    assert a.shape == b.shape
+    # the outline is black and dash-dotted: many more near-black pixels with the region drawn
+    dark = lambda img: int((img[..., :3].max(axis=2) < 0.15).sum())  # noqa: E731
+    assert dark(b) > dark(a) + 500
+    # the long title is on the canvas: text near the top, and nothing dark runs into any edge of the image
+    ink = b[..., :3].max(axis=2) < 0.5
+    assert ink[:60].sum() > 50
+    assert not (ink[0].any() or ink[-1].any() or ink[:, 0].any() or ink[:, -1].any())

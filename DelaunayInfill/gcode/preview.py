@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import os
+import textwrap
 
 import numpy as np
 
 from .area import segments_of
 from .read import TYPE_CODES, MachineState, RetractionModel, iter_file_chunks, parse_layer
 
-__all__ = ["layer_segments", "render_layer", "render_layers", "MATPLOTLIB_MISSING"]
+__all__ = ["layer_segments", "layer_view", "region_outlines", "render_layer", "render_layers", "MATPLOTLIB_MISSING"]
 
 MATPLOTLIB_MISSING = "the preview needs matplotlib: pip install 'DelaunayInfill[plot]' (or pip install matplotlib)"
 
@@ -25,10 +26,16 @@ _STYLE = {
     "PRIME-TOWER": ("#8c564b", "prime tower"),
 }
 _NAMES = {v: k for k, v in TYPE_CODES.items()}
+_REGION_COLOURS = ("#000000", "#e377c2", "#7f7f7f", "#bcbd22", "#1f77b4")
 
 
 def layer_segments(path, layer: int, *, occurrence: int = 0) -> dict[str, np.ndarray]:
-    """The moves of layer `layer` of a G-code file, grouped by line type.
+    """The moves of layer `layer` of a G-code file, grouped by line type (see `layer_view`)."""
+    return layer_view(path, layer, occurrence=occurrence)[0]
+
+
+def layer_view(path, layer: int, *, occurrence: int = 0) -> tuple[dict[str, np.ndarray], float, float]:
+    """The moves of layer `layer` of a G-code file, grouped by line type, with its heights.
 
     Parameters
     ----------
@@ -40,8 +47,9 @@ def layer_segments(path, layer: int, *, occurrence: int = 0) -> dict[str, np.nda
 
     Returns
     -------
-    dict
-        Type name (``"FILL"``, ``"travel"``, ...) -> segments, shape (k, 2, 2), mm.
+    (dict, float, float)
+        Type name (``"FILL"``, ``"travel"``, ...) -> segments, shape (k, 2, 2), mm; the layer's
+        print height Z and the height it was sliced at (the middle of the layer), mm.
 
     Raises
     ------
@@ -51,6 +59,7 @@ def layer_segments(path, layer: int, *, occurrence: int = 0) -> dict[str, np.nda
     state, retraction = MachineState(), RetractionModel()
     seen = 0
     layers = []
+    prev_z = None
     with open(path, encoding="utf-8", errors="replace", newline="") as f:
         for chunk in iter_file_chunks(f):
             parse = parse_layer(chunk, state, retraction)
@@ -59,8 +68,11 @@ def layer_segments(path, layer: int, *, occurrence: int = 0) -> dict[str, np.nda
             layers.append(parse.number)
             if parse.number == layer:
                 if seen == occurrence:
-                    return _group(parse)
+                    # the slice height as the G-code pass takes it: half a layer below the print height
+                    height = parse.z - prev_z if prev_z is not None and 0 < parse.z - prev_z < 2.0 else min(parse.z, 0.2)
+                    return _group(parse), float(parse.z), float(parse.z - height / 2)
                 seen += 1
+            prev_z = parse.z
     if not layers:
         raise ValueError(f"{os.fspath(path)} has no ';LAYER:' lines")
     raise ValueError(f"{os.fspath(path)} has no layer {layer} (layers {min(layers)}..{max(layers)})")
@@ -84,7 +96,31 @@ def _group(parse) -> dict[str, np.ndarray]:
     return out
 
 
-def _draw(ax, groups, title, line_width):
+def region_outlines(regions, z: float) -> list[tuple[np.ndarray, str]]:
+    """The outlines of density regions at height `z`.
+
+    Parameters
+    ----------
+    regions : sequence of Region
+        Density regions (`settings.Region`: a mesh or a polygon with a density fraction).
+    z : float
+        The slice height, mm.
+
+    Returns
+    -------
+    list of (ndarray, str)
+        Each ring as points, shape (n, 2), mm, with its region's label (name and density in %).
+    """
+    rings = []
+    for region in regions:
+        label = f"{region.name} {region.density * 100:g} %"
+        for poly in region.at(z).geoms:
+            for ring in (poly.exterior, *poly.interiors):
+                rings.append((np.asarray(ring.coords)[:, :2], label))
+    return rings
+
+
+def _draw(ax, groups, title, line_width, outlines=()):
     from matplotlib.collections import LineCollection
 
     handles = []
@@ -104,9 +140,16 @@ def _draw(ax, groups, title, line_width):
         lc = LineCollection(segs, colors=colour, linewidths=line_width, capstyle="round", label=label)
         ax.add_collection(lc)
         handles.append(lc)
+    for k, label in enumerate(dict.fromkeys(lbl for _, lbl in outlines)):
+        rings = [ring for ring, lbl in outlines if lbl == label]
+        lc = LineCollection(rings, colors=_REGION_COLOURS[k % len(_REGION_COLOURS)], linewidths=1.4,
+                            linestyles="dashdot", label=f"region {label}")
+        ax.add_collection(lc)
+        handles.append(lc)
     ax.set_aspect("equal")
     ax.autoscale_view()
-    ax.set_title(title, fontsize=10)
+    # long file names wrap: a title never runs past its panel
+    ax.set_title("\n".join(textwrap.wrap(title, 48)) or title, fontsize=10)
     ax.set_xlabel("X (mm)")
     ax.set_ylabel("Y (mm)")
     return handles
@@ -117,8 +160,8 @@ def render_layers(panels, out_path, *, dpi: int = 150, line_width: float = 1.0, 
 
     Parameters
     ----------
-    panels : sequence of (groups, title)
-        `layer_segments` results with their titles.
+    panels : sequence of (groups, title) or (groups, title, outlines)
+        `layer_segments` results with their titles, and optionally `region_outlines` to draw.
     out_path : path-like
     window : (x0, y0, x1, y1), optional
         The part of the bed to show, mm (default: everything the layer prints).
@@ -142,27 +185,31 @@ def render_layers(panels, out_path, *, dpi: int = 150, line_width: float = 1.0, 
         raise ImportError(MATPLOTLIB_MISSING) from exc
     fig, axes = plt.subplots(1, len(panels), figsize=(6.4 * len(panels), 6.4), squeeze=False)
     handles = []
-    for ax, (groups, title) in zip(axes[0], panels, strict=True):
-        handles = _draw(ax, groups, title, line_width) or handles
+    for ax, (groups, title, *outlines) in zip(axes[0], panels, strict=True):
+        handles = _draw(ax, groups, title, line_width, *outlines) or handles
         if window is not None:
             ax.set_xlim(window[0], window[2])
             ax.set_ylim(window[1], window[3])
     by_label = {h.get_label(): h for ax in axes[0] for h in ax.collections}
-    fig.legend(by_label.values(), by_label.keys(), loc="lower center", ncol=min(7, len(by_label)), fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.legend(by_label.values(), by_label.keys(), loc="lower center", ncol=min(5, len(by_label)), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
     out_path = os.fspath(out_path)
     tmp = out_path + ".tmp.png"
-    fig.savefig(tmp, dpi=dpi)
+    # bbox "tight": titles, labels and the legend stay on the canvas whatever the part's shape
+    fig.savefig(tmp, dpi=dpi, bbox_inches="tight", pad_inches=0.15)
     plt.close(fig)
     os.replace(tmp, out_path)
     return out_path
 
 
-def render_layer(path, layer: int, out_path, *, before=None, occurrence: int = 0, dpi: int = 150, window=None) -> str:
+def render_layer(path, layer: int, out_path, *, before=None, occurrence: int = 0, dpi: int = 150, window=None,
+                 regions=()) -> str:
     """PNG top view of one layer; with `before`, the original on the left for comparison; `window`
-    (x0, y0, x1, y1) mm zooms in."""
+    (x0, y0, x1, y1) mm zooms in; `regions` (`settings.Region`) are drawn as outlines at the layer's
+    slice height."""
     panels = []
-    if before is not None:
-        panels.append((layer_segments(before, layer, occurrence=occurrence), f"{os.path.basename(os.fspath(before))} — layer {layer}"))
-    panels.append((layer_segments(path, layer, occurrence=occurrence), f"{os.path.basename(os.fspath(path))} — layer {layer}"))
+    for source in ([before] if before is not None else []) + [path]:
+        groups, z, z_slice = layer_view(source, layer, occurrence=occurrence)
+        title = f"{os.path.basename(os.fspath(source))} — layer {layer} (Z {z:g} mm)"
+        panels.append((groups, title, region_outlines(regions, z_slice)))
     return render_layers(panels, out_path, dpi=dpi, window=window)

@@ -307,7 +307,9 @@ def _split_empty_regions(regions: list) -> tuple[list, object, list]:
 class _RegionTally:
     target: float
     length: float = 0.0
-    area: float = 0.0
+    area: float = 0.0  # summed over the layers, mm2
+    layers: int = 0  # layers in which the region holds infill area
+    last_chunk: int = -1
 
 
 @dataclass
@@ -371,6 +373,7 @@ class _Run:
         self.mesh_density: dict[str, float] = {}
         self.region_density: dict[str, float] = {}
         self.tally: dict[str, _RegionTally] = {}
+        self.chunks_seen = 0  # the layers' per-region tally counts a region once per chunk
         self.zone_areas: dict[tuple, tuple] = {}
         self.clips: dict[tuple, object] = {}
         self.result_memo: dict[int, tuple] = {}
@@ -464,9 +467,13 @@ class _Run:
             t = self.tally[name] = _RegionTally(target)
         t.length += length
         t.area += area
+        if area > 0 and t.last_chunk != self.chunks_seen:
+            t.layers += 1
+            t.last_chunk = self.chunks_seen
 
     # ------------------------------------------------------------------ per chunk
     def process_chunk(self, text: str) -> str:
+        self.chunks_seen += 1
         words = layer_words(text) if self.repeats is not None and text.startswith(";LAYER:") else None
         repeat_key = None
         if words is not None:
@@ -602,7 +609,8 @@ class _Run:
         out, self.state, self.prev_z = done
         counted, e_before, e_delta, tally, dt = added
         r = self.report
-        r.layers_repeated += 1
+        if counted[_COUNTED.index("layers_processed")]:
+            r.layers_repeated += 1  # repeats of layers that kept Cura's infill are not news
         for name, value in zip(_COUNTED, counted, strict=True):
             if value:
                 setattr(r, name, getattr(r, name) + value)
@@ -1234,7 +1242,7 @@ class _Run:
             if t is None or (name == "base" and t.area <= 1e-6 and len(self.tally) > 1):
                 continue  # regions tile the whole part: no base zone to report
             measured = t.length / t.area if t.area > 1e-9 else float("nan")
-            r.regions.append(RegionReport(name, t.target, measured, t.area))
+            r.regions.append(RegionReport(name, t.target, measured, t.area, t.layers))
         return patch_header(header, self.time_delta, self.e_before, self.e_delta, self.s, volumetric=self.info.volumetric,
                             layers=(r.layers_processed, r.layers_kept, len(r.failed_layers)))
 
@@ -1351,7 +1359,7 @@ def process_gcode(
         if cancel is not None and cancel():
             raise ProcessCancelled("cancelled")
         out.append(run.process_chunk(chunk))
-        if progress is not None and (i % 16 == 0 or i == total - 1):
+        if progress is not None:  # every layer: Cura's message moves layer by layer
             progress((i + 1) / total)
     out[0] = run.finish(out[0])
     run.report.written = True
@@ -1436,7 +1444,7 @@ def process_file(
                     header_out = text
                 else:
                     body.write(text)
-                if progress is not None and i % 32 == 0:
+                if progress is not None:
                     progress(min(1.0, done / size))
         header_out = run.finish(header_out or "")
         if (not write_unchanged and run.report.layers_processed == 0) or (not keep_going and run.report.failed_layers):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -185,7 +186,20 @@ class RegionReport:
     name: str
     target: float
     measured: float
-    area_mm2: float
+    area_mm2: float  # summed over the layers it holds infill in
+    layers: int = 0
+
+    @property
+    def area_per_layer_mm2(self) -> float:
+        return self.area_mm2 / self.layers if self.layers else 0.0
+
+
+def _shown_region_name(name: str) -> str:
+    """A region's name for the summary: a mesh's or an STL's file name without its folders."""
+    head, sep, rest = name.partition(" ")
+    if head == "mesh" and sep:
+        return f"mesh {os.path.basename(rest.replace(chr(92), '/')) or rest}"
+    return os.path.basename(name.replace(chr(92), "/")) or name
 
 
 @dataclass
@@ -237,14 +251,15 @@ class ProcessReport:
             s = int(round(s))
             return f"{s // 3600}h{s % 3600 // 60:02d}m{s % 60:02d}s"
 
+        kept_failed = len(self.failed_layers)
+        out = [f"layers {self.layers_total}: {self.layers_processed} processed"
+               + (f" ({self.layers_repeated} of them written from an earlier layer they repeat)"
+                  if self.layers_repeated else "")
+               + f", {self.layers_kept} left as Cura's (no infill to replace)"
+               + (f", {kept_failed} kept Cura's infill after a FAILURE" if kept_failed else ""),
+               ""]
         rows = [
-            ("layers", f"{self.layers_total}", f"{self.layers_processed} processed",
-             f"{self.layers_kept} as Cura's" + (f", {len(self.failed_layers)} FAILED" if self.failed_layers else "")),
-        ]
-        if self.layers_repeated:
-            rows.append(("  repeats", "", f"{self.layers_repeated} layers", "written from an earlier one"))
-        rows += [
-            ("FILL blocks", "", f"{self.blocks_replaced} replaced", f"{self.blocks_kept} kept as Cura's"),
+            ("FILL blocks", "", f"{self.blocks_replaced} replaced", f"{self.blocks_kept} left as Cura's"),
             (f"filament ({unit})", f"{self.filament_before_mm:.1f}", f"{self.filament_after_mm:.1f}", pct(self.filament_after_mm, self.filament_before_mm)),
             ("print time", hms(self.time_before_s), hms(self.time_after_s), pct(self.time_after_s, self.time_before_s)),
             ("infill path (mm)", f"{self.infill_before_mm:.0f}", f"{self.infill_after_mm:.0f}", pct(self.infill_after_mm, self.infill_before_mm)),
@@ -253,14 +268,16 @@ class ProcessReport:
         if self.cura_infill_kept_mm > 0:
             rows.append(("  Cura's lines kept", "", f"{self.cura_infill_kept_mm:.0f} mm",
                          f"in {self.layers_with_cura_infill_kept} layers"))
-        out = [f"{'':20s} {'before':>12s} {'after':>16s} {'change':>24s}"]
+        out.append(f"{'':20s} {'before':>12s} {'after':>16s} {'change':>24s}")
         out += [f"{a:20s} {b:>12s} {c:>16s} {d:>24s}" for a, b, c, d in rows]
         if self.regions:
+            names = [_shown_region_name(r.name) for r in self.regions]
+            width = max(20, *(len(n) for n in names))
             out.append("")
-            out.append(f"{'region':28s} {'target':>8s} {'measured':>9s} {'area mm2':>10s}")
-            for r in self.regions:
+            out.append(f"{'region':{width}s} {'target':>8s} {'measured':>9s} {'mm2 per layer':>14s} {'layers':>7s}")
+            for name, r in zip(names, self.regions):
                 meas = "n/a" if not math.isfinite(r.measured) else f"{r.measured * 100:.1f} %"
-                out.append(f"{r.name[:28]:28s} {r.target * 100:7.1f} % {meas:>9s} {r.area_mm2:10.0f}")
+                out.append(f"{name:{width}s} {r.target * 100:6.1f} % {meas:>9s} {r.area_per_layer_mm2:14.0f} {r.layers:7d}")
         if self.failed_layers:
             shown = ", ".join(str(n) for n in self.failed_layers[:20])
             more = " ..." if len(self.failed_layers) > 20 else ""

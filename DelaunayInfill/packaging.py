@@ -241,10 +241,17 @@ def install_plugin(dest: Path | str | None = None, root: Path | None = None) -> 
 
 
 def _cmd_package(args) -> int:
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        print(f"error: {out} is a file: give a folder with -o", file=sys.stderr)
+        return 2
     try:
         path = build_package(args.output)
-    except (PackagingError, OSError) as error:
-        print(f"delaunay-infill package: {error}", file=sys.stderr)
+    except PackagingError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:  # the OS's words, without Python's [Errno n] prefix
+        print(f"error: cannot write the package into {out}: {error.strerror or error}", file=sys.stderr)
         return 2
     with zipfile.ZipFile(path) as archive:
         count = sum(1 for name in archive.namelist() if name.startswith("files/"))

@@ -306,3 +306,11 @@ def test_preview_draws_region_outlines_and_keeps_titles_on_the_canvas(star, tmp_
     ink = b[..., :3].max(axis=2) < 0.5
     assert ink[:60].sum() > 50
     assert not (ink[0].any() or ink[-1].any() or ink[:, 0].any() or ink[:, -1].any())
+
+
+def test_package_output_paths_that_cannot_be_written(tmp_path):
+    (tmp_path / "file").write_text("")
+    quiet_failure(run("package", "-o", tmp_path / "file"), 2, "is a file: give a folder with -o")
+    proc = run("package", "-o", "/proc/no-such-folder")  # not writable even for root
+    quiet_failure(proc, 2, "cannot write the package into /proc/no-such-folder")
+    assert "Errno" not in proc.stderr

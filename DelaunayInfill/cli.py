@@ -400,7 +400,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reslice", action="store_true", help="slice the bundled STLs with CuraEngine first")
     p.set_defaults(func=_cmd_demo)
 
-    for module in (".figures", ".packaging"):
+    for module in (".figures_cli", ".packaging"):
         try:
             mod = importlib.import_module(module, __package__)
         except ImportError:

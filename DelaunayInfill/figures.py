@@ -17,7 +17,6 @@ matplotlib is an optional extra (``pip install DelaunayInfill[plot]``).
 from __future__ import annotations
 
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -26,7 +25,7 @@ from shapely.geometry import Point, Polygon, box
 
 from .pattern import InfillPattern, generate_infill
 
-__all__ = ["register_cli", "star_polygon", "star_regions", "write_figures"]
+__all__ = ["star_polygon", "star_regions", "write_figures"]
 
 FIGURE10_DENSITIES = (0.3, 0.3, 0.2, 0.5, 0.5, 0.1)
 
@@ -213,35 +212,3 @@ def write_figures(out_dir: Path, seed: int = 0, table: Path | None = None) -> st
     table.parent.mkdir(parents=True, exist_ok=True)
     table.write_text(text, encoding="utf-8")
     return text
-
-
-def register_cli(subparsers) -> None:
-    """Add ``figures`` to the ``delaunay-infill`` command line."""
-    p = subparsers.add_parser(
-        "figures", help="redraw the paper's Figures 2 and 10 with measured densities",
-        description="Redraw the paper's Figure 2 (10, 40, 80 %% on a square) and Figure 10 (the star's six "
-        "regions, both layouts) with the densities measured, and print the calibration tables as markdown.")
-    p.add_argument("-o", "--out", default="figures", help="output folder, made when missing (default ./figures)")
-    p.add_argument("--table", default=None, help="markdown tables file (default OUT/figures.md)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the patterns (default 0)")
-    p.set_defaults(func=_run)
-
-
-def _run(args) -> int:
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        print(f"error: {out} is a file: give a folder with -o", file=sys.stderr)
-        return 2
-    table = Path(args.table) if args.table else out / "figures.md"
-    if not table.parent.is_dir() and table.parent != out:
-        print(f"error: the folder {table.parent} does not exist", file=sys.stderr)
-        return 2
-    try:
-        text = write_figures(out, seed=args.seed, table=table)
-    except OSError as exc:
-        print(f"error: cannot write into {out}: {exc.strerror}", file=sys.stderr)
-        return 2
-    sys.stdout.write(text)
-    for name in (out / "figure2.png", out / "figure10.png", table):
-        print(f"wrote {name}", file=sys.stderr)
-    return 0

@@ -177,6 +177,18 @@ def test_console_script_runs():
         assert command in proc.stdout
 
 
+@pytest.mark.parametrize("args", [["--help"], ["process", "--help"], ["preview", "--help"], ["figures", "--help"],
+                                  ["package", "--help"]])
+def test_help_loads_no_heavy_module(args):
+    """`--help` answers at once: numpy, scipy, shapely and matplotlib load only when a command runs."""
+    code = ("import sys\nfrom DelaunayInfill.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
+            "heavy = sorted(m for m in ('numpy', 'scipy', 'shapely', 'matplotlib') if m in sys.modules)\n"
+            "print('HEAVY', heavy)")
+    proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert "HEAVY []" in proc.stdout, proc.stdout[-300:]
+
+
 def test_module_entry_point_matches(star_gcode, tmp_path):
     proc = subprocess.run([sys.executable, "-m", "DelaunayInfill.cli", "process", str(star_gcode), "-o",
                            str(tmp_path / "m.gcode"), "-q"], capture_output=True, text=True, timeout=300)

@@ -214,8 +214,13 @@ def _cmd_process(args) -> int:
         target = os.path.join(os.path.dirname(os.path.abspath(args.input)),
                               f".{os.path.basename(args.input)}.delaunay-verify.gcode")
     try:
+        clock = None
+        if args.stages:
+            from .gcode.stages import StageClock
+
+            clock = StageClock()
         report = process_file(args.input, target, settings, regions=regions, in_place=args.in_place and target is None,
-                              progress=progress, write_unchanged=False, keep_going=args.keep_going)
+                              progress=progress, write_unchanged=False, keep_going=args.keep_going, stages=clock)
     except GCodeError as exc:
         progress.done()
         print(f"error: {args.input}: {exc}; nothing was written", file=sys.stderr)
@@ -231,6 +236,9 @@ def _cmd_process(args) -> int:
     out = args.input if args.in_place else args.output
     if not args.quiet:
         print(report.format_table())
+    if clock is not None:  # asked for: shown even with -q
+        print("\nwhere the time went (--stages):")
+        print(clock.table(report.layers_processed))
     for warning in _hints(report, args):
         print(f"warning: {warning}", file=sys.stderr)
     if report.failed_layers and not args.keep_going:
@@ -377,6 +385,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(with --in-place: before it replaces the input)")
     p.add_argument("--keep-going", action="store_true",
                    help="write the output even when some layers fail (they keep Cura's infill)")
+    p.add_argument("--stages", action="store_true",
+                   help="print where the time went: parse, areas, patterns, routes, emit, estimate, ...")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress line or summary")
     p.set_defaults(func=_cmd_process)
 

@@ -56,6 +56,7 @@ from .replay import (
 )
 from .settings import MeshSettings, ProcessReport, ProcessSettings, Region, RegionReport
 from .split import split_by_line_ends
+from .stages import OFF
 from .witness import kept_cura_pieces, witness_radius, witnessed
 
 __all__ = [
@@ -359,7 +360,9 @@ class _Run:
         regions: Sequence[Region],
         info: HeaderInfo,
         survey: Survey,
+        clock=OFF,
     ):
+        self.clock = clock  # `stages.StageClock` with --stages, else a no-op
         self.s = settings
         self.user_regions = list(regions)
         self.info = info
@@ -480,11 +483,13 @@ class _Run:
             repeat_key = self._repeat_key(words)
             record = self.repeats.get(repeat_key)
             if record is not None:
-                out = self._replay(text, words, record)
+                with self.clock("repeated layers"):
+                    out = self._replay(text, words, record)
                 if out is not None:
                     return out
             state_before, totals_before = self.state.copy(), self._totals()
-        parse = parse_layer(text, self.state, self.retraction)
+        with self.clock("parse"):
+            parse = parse_layer(text, self.state, self.retraction)
         m = parse.moves
         # Net E per extruder (retractions and primes included): what Cura's filament figure counts.
         has_e = m["de"] != 0
@@ -532,7 +537,8 @@ class _Run:
             sections = self._region_sections(parse.z) if words is not None and self.user_regions else None
             self.prev_z = parse.z
         if words is not None and parse.number is not None and not failed:
-            self._record(repeat_key, text, words, parse, state_before, totals_before, edits, sections)
+            with self.clock("repeat records"):
+                self._record(repeat_key, text, words, parse, state_before, totals_before, edits, sections)
         if time_lines and self.time_delta != 0.0:
             if not changed:
                 lines = list(lines)
@@ -712,7 +718,9 @@ class _Run:
     def _layer(self, parse: LayerParse):
         """Cura's FILL of one parsed layer replaced: areas, density regions, patterns, routes, emit."""
         self.layer_densities = {}
-        steps = self._mesh_steps(parse)
+        clock = self.clock
+        with clock("areas"):
+            steps = self._mesh_steps(parse)
         parent_of = self._modifiers_of(steps)
         hosts = [n for n in steps if self.s.enabled(n) and n not in parent_of]
         if not hosts:
@@ -720,16 +728,20 @@ class _Run:
         for name in hosts:
             if not steps[name].geo.has_walls:  # a mesh of its own without walls: its area is its FILL hull
                 st = steps[name]
-                st.geo = mesh_layer(parse, name, st.line_width, st.overlap, st.closing, self.area_cache)
+                with clock("areas"):
+                    st.geo = mesh_layer(parse, name, st.line_width, st.overlap, st.closing, self.area_cache)
         out = _LayerOut(retraction=self._retraction())
         for name in hosts:
             children = [steps[c] for c, p in parent_of.items() if p == name]
             host = self._host_infill(parse, steps[name], children, out)
             if host is None:
                 continue
-            self._route(parse, host, out)
-            self._emit_host(parse, host, out)
-        return self._splice(parse, out)
+            with clock("routes"):
+                self._route(parse, host, out)
+            with clock("emit"):
+                self._emit_host(parse, host, out)
+        with clock("emit"):
+            return self._splice(parse, out)
 
     def _mesh_steps(self, parse: LayerParse) -> dict:
         """Every mesh with FILL in the layer: its line width, overlap and rebuilt area (`mesh_layer`)."""
@@ -783,8 +795,10 @@ class _Run:
         Cura's lines, its density regions, the pattern's paths, and Cura's lines where those do not take over."""
         lw = st.line_width
         blocks = parse.blocks
+        clock = self.clock
         if not st.geo.used_hull:  # (a hull is made of the lines: witnessed already)
-            st.geo = self._witnessed(parse, st.geo, [c.geo for c in children], lw)
+            with clock("areas"):
+                st.geo = self._witnessed(parse, st.geo, [c.geo for c in children], lw)
         g = st.geo
         area = g.area
         region_list = [(a, r.density, r.name or f"region {k + 1}") for k, r in enumerate(self.user_regions)
@@ -794,7 +808,8 @@ class _Run:
         covered_children = set()  # modifiers whose area the host's pattern fills
         given = {r[2] for r in region_list}
         # (the modifiers' parts are pieces of the host's area: `_modifier_areas` splits it)
-        parts = self._modifier_areas(st, children) if children else []
+        with clock("areas"):
+            parts = self._modifier_areas(st, children) if children else []
         for c, ca in zip(children, parts, strict=True):
             if ca.is_empty:
                 continue
@@ -825,17 +840,20 @@ class _Run:
         if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
             paths, used_regions = [], []
         else:
-            pattern, _, used_regions = self.patterns.get(st.name, area, density, lw, region_list)
-            result = self._clip(pattern, self._line_area(area, lw, st.overlap), start)
-            paths = self._paths(result, min_length=lw / 2)
-            self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
+            with clock("patterns"):
+                pattern, _, used_regions = self.patterns.get(st.name, area, density, lw, region_list)
+                result = self._clip(pattern, self._line_area(area, lw, st.overlap), start)
+                paths = self._paths(result, min_length=lw / 2)
+            with clock("density report"):
+                self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
         # Cura's lines where the new infill does not take over (a part not confirmed, an island too
         # small for the pattern) are printed as Cura printed them, on the route with the new paths.
         reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
         cura_fill = np.concatenate([g.fill, *(c.geo.fill for c in children)])
-        kept = kept_cura_pieces(cura_fill, area, paths, lw, reach, empty)
-        if kept:
-            paths, _ = order_paths([*paths, *kept], start)
+        with clock("Cura's lines kept"):
+            kept = kept_cura_pieces(cura_fill, area, paths, lw, reach, empty)
+            if kept:
+                paths, _ = order_paths([*paths, *kept], start)
             out.stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))
             out.stats["layers_with_cura_infill_kept"] = 1
         for part, zname in empty_parts:
@@ -942,10 +960,12 @@ class _Run:
         written = emit_block(new_paths, blk.before, blk.after, params, blk.extra_lines)
         out.replaced[bi] = written.lines
         if out.old_times is None:
-            out.old_times = _move_seconds(m, self.acceleration, s.jerk)
-        old_t = float(out.old_times[mask].sum())
-        new_t = written.seconds + (float(move_times(np.concatenate(written.dist), np.concatenate(written.feed),
-                                                    self.acceleration).sum()) if written.dist else 0.0)
+            with self.clock("estimate"):
+                out.old_times = _move_seconds(m, self.acceleration, s.jerk)
+        with self.clock("estimate"):
+            old_t = float(out.old_times[mask].sum())
+            new_t = written.seconds + (float(move_times(np.concatenate(written.dist), np.concatenate(written.feed),
+                                                        self.acceleration).sum()) if written.dist else 0.0)
         out.dt += new_t - old_t
         # Net change of the filament used: every E move of the new block minus those of Cura's.
         old_net = float(m["de"][mask].sum())  # not after.e - before.e: Cura may G92 E0 inside
@@ -1312,6 +1332,7 @@ def process_gcode(
     regions: Iterable[Region] = (),
     progress: Callable[[float], None] | None = None,
     cancel: Callable[[], bool] | None = None,
+    stages=None,
 ) -> tuple[list[str], ProcessReport]:
     """Replace Cura's sparse infill in Cura's in-memory G-code list.
 
@@ -1326,6 +1347,8 @@ def process_gcode(
         Called with the fraction done.
     cancel : callable() -> bool, optional
         Polled between layers; True raises ProcessCancelled.
+    stages : stages.StageClock, optional
+        Times the run's stages (``--stages``).
 
     Returns
     -------
@@ -1352,7 +1375,7 @@ def process_gcode(
     info = check_cura_gcode(layers[0] + (layers[1] if len(layers) > 1 else ""), chunks[-1] if len(chunks) > 1 else "", survey.layer_chunks)
     if info.processed:
         return layers, ProcessReport(already_processed=True, seconds=time.perf_counter() - t0)
-    run = _Run(settings, regions, info, survey)
+    run = _Run(settings, regions, info, survey, clock=stages or OFF)
     out = []
     total = len(chunks)
     for i, chunk in enumerate(chunks):
@@ -1367,6 +1390,8 @@ def process_gcode(
         # The caller's list was not split at layers: hand back one string per chunk (still Cura's form).
         pass
     run.report.seconds = time.perf_counter() - t0
+    if stages is not None:
+        stages.total = run.report.seconds
     return out, run.report
 
 
@@ -1381,6 +1406,7 @@ def process_file(
     cancel: Callable[[], bool] | None = None,
     write_unchanged: bool = True,
     keep_going: bool = True,
+    stages=None,
 ) -> ProcessReport:
     """Process a G-code file, streaming layer by layer; write `out_path` atomically.
 
@@ -1389,7 +1415,8 @@ def process_file(
     it.  Nothing is written when the input is refused, already processed, or
     processing raises; nor when no layer was processed and `write_unchanged`
     is False, nor when a layer failed and `keep_going` is False
-    (``report.written`` says which).
+    (``report.written`` says which).  `stages` (a `stages.StageClock`) times
+    the run's stages, as for `process_gcode`.
 
     Raises
     ------
@@ -1427,7 +1454,7 @@ def process_file(
     info = check_cura_gcode(survey.first_chunk, survey.last_chunk if survey.layer_chunks else "", survey.layer_chunks)
     if info.processed:
         return ProcessReport(already_processed=True, seconds=time.perf_counter() - t0)
-    run = _Run(settings, regions, info, survey)
+    run = _Run(settings, regions, info, survey, clock=stages or OFF)
     out_dir = os.path.dirname(os.path.abspath(out_path))
     body_fd, body_path = tempfile.mkstemp(prefix=".delaunay-body-", suffix=".gcode", dir=out_dir)
     final_path = None
@@ -1449,6 +1476,8 @@ def process_file(
         header_out = run.finish(header_out or "")
         if (not write_unchanged and run.report.layers_processed == 0) or (not keep_going and run.report.failed_layers):
             run.report.seconds = time.perf_counter() - t0
+            if stages is not None:
+                stages.total = run.report.seconds
             return run.report  # (the body's temporary file goes below)
         final_fd, final_path = tempfile.mkstemp(prefix=".delaunay-out-", suffix=".gcode", dir=out_dir)
         with os.fdopen(final_fd, "w", encoding="utf-8", newline="") as out, open(body_path, encoding="utf-8", newline="") as body:
@@ -1472,4 +1501,6 @@ def process_file(
     if progress is not None:
         progress(1.0)
     run.report.seconds = time.perf_counter() - t0
+    if stages is not None:
+        stages.total = run.report.seconds
     return run.report

@@ -123,6 +123,9 @@ def _parity_inside(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     return (hits.sum(axis=1) % 2) == 1
 
 
+_COLLINEAR_MM = 1e-7  # a vertex this close to the line through its neighbours is dropped
+
+
 def slice_mesh(triangles: np.ndarray, z: float, *, min_area: float = 1e-6):
     """Cross-section of a closed triangle mesh at height `z`.
 
@@ -153,7 +156,11 @@ def slice_mesh(triangles: np.ndarray, z: float, *, min_area: float = 1e-6):
     reps = np.array([f.representative_point().coords[0] for f in faces])
     inside = _parity_inside(reps, segs)
     kept = [f for f, ok in zip(faces, inside, strict=True) if ok]
-    return to_multipolygon(unary_union(kept)) if kept else empty_area()
+    if not kept:
+        return empty_area()
+    # Collinear vertices (where a flat side's triangles meet the plane) go: a prism's sections are
+    # then the same polygon at every height, so layers that repeat are seen to repeat.
+    return to_multipolygon(unary_union(kept).simplify(_COLLINEAR_MM))
 
 
 def polygons_at(triangles: np.ndarray, z: float) -> list:

@@ -196,3 +196,18 @@ def test_the_comparison_allows_only_rounding_in_e_and_the_header_figures():
     assert differences(head + move, ";FLAVOR:Marlin\n;Filament used: 0.046470mm\n" + move, E_ROUNDING) != []
     assert differences(head + move, head + "G1 X20 Y10 E13.76000\n", E_ROUNDING) != []
     assert differences(head + move, head + "G1 X20 Y11 E13.75000\n", E_ROUNDING) != []
+
+
+def test_a_mesh_prism_region_repeats_like_the_part():
+    """A box STL's triangulated sides cut the plane at other points at every height: its sections are
+    still the same polygon (collinear vertices dropped), so the layers repeat, as processing every layer
+    would write them."""
+    from DelaunayInfill.models import box
+
+    layers = bundled("star.gcode.gz")
+    dense = Region(0.6, triangles=box(12, 12, 30, 110, 112), name="dense.stl")
+    assert dense.at(1.1).wkb == dense.at(1.3).wkb and len(dense.at(1.1).geoms[0].exterior.coords) == 5
+    on, off = both_ways(layers, regions=[dense])
+    assert_same_result(on, off)
+    plain, _ = both_ways(layers)
+    assert on[1].layers_repeated >= plain[1].layers_repeated - 2

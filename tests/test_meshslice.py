@@ -79,3 +79,13 @@ def test_bad_stl_is_refused(tmp_path, content):
     path.write_bytes(content)
     with pytest.raises(ValueError):
         read_stl(path)
+
+
+def test_sections_carry_no_collinear_vertices():
+    """Where a flat side's triangles meet the plane the section gets extra points on a straight edge:
+    they go, so a prism gives the same polygon at every height."""
+    tri = box(12, 12, 30, 110, 112)
+    a, b = slice_mesh(tri, 1.1), slice_mesh(tri, 7.3)
+    assert a.wkb == b.wkb
+    assert len(a.geoms[0].exterior.coords) == 5
+    assert a.area == pytest.approx(144.0)

@@ -167,6 +167,35 @@ def modifier_regions(specs: list[str], offset) -> list:
     return regions
 
 
+def painted_region(spec: str, offset):
+    """A ``--paint MODEL.stl:FACES.json:PCT:DEPTH`` value as a density region (ValueError in the CLI's words)."""
+    from .painting import PaintedRegion
+
+    parts = spec.rsplit(":", 3)
+    if len(parts) != 4 or not all(parts):
+        raise ValueError(f"--paint: expected MODEL.stl:FACES.json:PCT:DEPTH, got {spec!r}")
+    stl, faces, pct, depth = parts
+    try:
+        density = _percent(pct)
+    except argparse.ArgumentTypeError as exc:
+        raise ValueError(f"--paint: {exc}") from None
+    try:
+        depth_mm = float(depth)
+    except ValueError:
+        raise ValueError(f"--paint: the depth must be a number of mm, got {depth!r}") from None
+    if not (0.0 < depth_mm < float("inf")):
+        raise ValueError(f"--paint: the depth must be a positive number of mm, got {depth!r}")
+    for path in (stl, faces):
+        if not os.path.isfile(path):
+            raise ValueError(f"--paint: no such file: {path}")
+    try:
+        return PaintedRegion.from_files(stl, faces, density, depth_mm, offset=offset)
+    except OSError as exc:
+        raise ValueError(f"--paint: cannot read {exc.filename or faces}: {exc.strerror or exc}") from None
+    except ValueError as exc:
+        raise ValueError(f"--paint: {exc}") from None
+
+
 def _cmd_process(args) -> int:
     from .gcode import GCodeError, MeshSettings, ProcessSettings, process_file
 
@@ -201,6 +230,8 @@ def _cmd_process(args) -> int:
         settings.validate()
         offset = args.modifier_offset or (0.0, 0.0, 0.0)
         regions = modifier_regions(args.modifier, offset)
+        # --paint (issue 14): painted faces' depth-neighbourhood inside the model, placed like --modifier STLs
+        regions += [painted_region(spec, offset) for spec in args.paint]
     except (ValueError, argparse.ArgumentTypeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_REFUSED
@@ -273,7 +304,7 @@ def _cmd_process(args) -> int:
 def _hints(report, args) -> list[str]:
     """What the user should know of a run that did less than asked, with what to do."""
     hints = []
-    if args.modifier:
+    if args.modifier or args.paint:
         for region in report.regions:
             if region.name.startswith(("base", "mesh ")):
                 continue
@@ -371,6 +402,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--modifier-offset", type=_offset, metavar="X,Y[,Z]",
                    help="shift modifier STLs into G-code coordinates (e.g. 110,110 for a model that CuraEngine "
                    "centred on a 220 mm bed; Z: a raft's lift, raft thickness + air gap - layer 0 Z overlap)")
+    p.add_argument("--paint", action="append", default=[], metavar="MODEL.stl:FACES.json:PCT:DEPTH",
+                   help="a density region painted on a model: the part of MODEL.stl within DEPTH mm of the "
+                   "triangles FACES.json lists ({\"faces\": [i, ...]}, 0-based, in the STL's order); placed as "
+                   "--modifier-offset places modifier STLs; repeatable")
     p.add_argument("--mesh", action="append", default=[], type=_named_percent, metavar="NAME:PCT",
                    help="density of a ;MESH: in the G-code (a Cura infill_mesh modifier, or a model); repeatable")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")

@@ -314,3 +314,12 @@ def test_package_output_paths_that_cannot_be_written(tmp_path):
     proc = run("package", "-o", "/proc/no-such-folder")  # not writable even for root
     quiet_failure(proc, 2, "cannot write the package into /proc/no-such-folder")
     assert "Errno" not in proc.stderr
+
+
+def test_a_painted_model_off_the_part_says_to_give_the_offset(star, tmp_path):
+    stl, faces = tmp_path / "model.stl", tmp_path / "faces.json"
+    write_stl(stl, box(20, 20, 12))  # model coordinates: off the star, which CuraEngine put at (110, 110)
+    faces.write_text('{"faces": [0, 1, 2, 3]}')
+    proc = run("process", star, "-o", tmp_path / "p.gcode", "--paint", f"{stl}:{faces}:60:4")
+    assert proc.returncode == 0, proc.stderr
+    assert "touches no infill" in proc.stderr and "--modifier-offset 110,110" in proc.stderr

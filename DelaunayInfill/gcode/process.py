@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
+from shapely.geometry import box as shapely_box
 
 from ..combing import CombingArea
 from ..geometry import contains_xy, empty_area, polygons_of, to_multipolygon, unary_union
@@ -73,6 +74,7 @@ __all__ = [
 _TIME_ELAPSED = re.compile(r"^;TIME_ELAPSED:(-?[\d.]+)", re.M)
 _MESH_LINE = re.compile(r"^;MESH:(.*?)\s*$", re.M)
 _M204 = re.compile(r"^M204 [^\n;]*?S(\d+\.?\d*)", re.M)
+_EXTRUDING_XY = re.compile(r"^G1 (?:F[\d.]+ )?X(-?[\d.]+) Y(-?[\d.]+) E", re.M)
 _DEFAULT_LINE_WIDTH = 0.4
 _RETRACT_TRAVEL_MM = 40.0  # a retraction and prime take about as long as this much travel
 _NEGLIGIBLE_AREA = 1e-9  # share of an area below which what is left of it is rounding, not a zone
@@ -93,10 +95,15 @@ class Survey:
     acceleration: float | None = None
     last_time_elapsed: float | None = None
     meshes: set = field(default_factory=set)  # the ;MESH: names (NONMESH left out)
+    # mesh -> [min x, min y, max x, max y] of its outer walls over the whole print, mm: where its
+    # infill can ever be, so one pattern can serve all its layers (`PatternCache`)
+    extents: dict = field(default_factory=dict)
 
     def add(self, text: str, index: int) -> None:
         if ";MESH:" in text:
             self.meshes.update(name for name in _MESH_LINE.findall(text) if name != "NONMESH")
+            if ";TYPE:WALL-OUTER" in text:
+                self._add_extents(text)
         if index == 0:
             self.first_chunk = text
         self.last_chunk = text
@@ -111,6 +118,26 @@ class Survey:
             m = _TIME_ELAPSED.match(text, at)
             if m:
                 self.last_time_elapsed = float(m.group(1))
+
+    def _add_extents(self, text: str) -> None:
+        heads = list(_MESH_LINE.finditer(text))
+        for k, head in enumerate(heads):
+            name = head.group(1)
+            if name == "NONMESH":
+                continue
+            end = heads[k + 1].start() if k + 1 < len(heads) else len(text)
+            at = text.find(";TYPE:WALL-OUTER", head.end(), end)
+            while at >= 0:
+                stop = text.find(";TYPE:", at + 16, end)
+                stop = end if stop < 0 else stop
+                xy = _EXTRUDING_XY.findall(text, at, stop)
+                if xy:
+                    pts = np.asarray(xy, dtype=float)
+                    lo, hi = pts.min(axis=0), pts.max(axis=0)
+                    box = self.extents.get(name)
+                    self.extents[name] = ([lo[0], lo[1], hi[0], hi[1]] if box is None else
+                                          [min(box[0], lo[0]), min(box[1], lo[1]), max(box[2], hi[0]), max(box[3], hi[1])])
+                at = text.find(";TYPE:WALL-OUTER", stop, end)
 
 
 # ----------------------------------------------------------------------------- patterns
@@ -143,8 +170,9 @@ class PatternCache:
     is really printed.
     """
 
-    def __init__(self, settings: ProcessSettings, per_key: int = 6):
+    def __init__(self, settings: ProcessSettings, per_key: int = 6, extents: dict | None = None):
         self.settings = settings
+        self.extents = extents or {}  # mesh -> its outer walls' [x0, y0, x1, y1] over the print, mm
         self.per_key = per_key
         self.entries: dict[tuple, list[tuple[object, list, object]]] = {}
         self.builds = 0
@@ -194,12 +222,30 @@ class PatternCache:
             if grow_from is None:
                 grow_from = footprint
         footprint = area if grow_from is None else unary_union([grow_from, area])
+        extent = self.extents.get(mesh)
+        if extent is not None and (grow_from is not None or _reaches_past(extent, area.bounds, _GROWTH_MM)):
+            # Where the mesh's infill can ever be, once its section is seen to grow upwards (a sphere's
+            # lower half, a cone on its tip, a flaring vase): the pattern is already there for the
+            # layers above, and their infill stacks.  (A prism, or a section that only shrinks, keeps
+            # the pattern of its own area.)
+            footprint = unary_union([footprint, shapely_box(*extent)])
         footprint = to_multipolygon(footprint.buffer(line_width, 4))
         pattern = _build_pattern(footprint, density, line_width, regions, self.settings)
         self.builds += 1
         bucket.insert(0, (footprint, regions, pattern))
         del bucket[self.per_key :]
         return pattern, footprint, regions
+
+
+# A mesh's extent reaching this far (mm) past a layer's infill area (walls and all) means its section
+# grows further up: more than any wall thickness or skin overlap.
+_GROWTH_MM = 4.0
+
+
+def _reaches_past(extent, bounds, margin: float) -> bool:
+    """Whether the rectangle `extent` (x0, y0, x1, y1) reaches more than `margin` past `bounds`."""
+    x0, y0, x1, y1 = bounds
+    return extent[0] < x0 - margin or extent[1] < y0 - margin or extent[2] > x1 + margin or extent[3] > y1 + margin
 
 
 _FINGERPRINTS: dict[int, tuple] = {}
@@ -370,7 +416,7 @@ class _Run:
         self.state = MachineState()
         self.retraction = RetractionModel()
         self.report = ProcessReport(volumetric=info.volumetric)
-        self.patterns = PatternCache(settings)
+        self.patterns = PatternCache(settings, extents=survey.extents)
         self.area_cache = AreaCache()
         self.mesh_lw: dict[str, float] = {}
         self.mesh_density: dict[str, float] = {}
@@ -1014,6 +1060,10 @@ class _Run:
                 # no families of parallel lines (gyroid, concentric, ...): twice the spacing their length
                 # gives (their lines wander, and a line multiplier doubles the length)
                 d = self._infill_density(f, lw, g.area.area) if not g.area.is_empty else None
+                if d is None and not g.area.is_empty:
+                    # too few lines to tell their pattern (gradual infill's sparsest steps print two or
+                    # three): their length still tells how far apart they are
+                    d = float(np.hypot(*(f[:, 1] - f[:, 0]).T).sum() * lw / g.area.area)
                 found = [2.0 * lw / d] if d else None
             if found:
                 spacing = max(spacing or 0.0, *found)

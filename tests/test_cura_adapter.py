@@ -142,3 +142,10 @@ def test_the_message_tells_where_cura_s_infill_was_kept():
 def test_the_infill_line_multiplier_multiplies_the_density():
     settings, _ = build_settings(_snapshot([_model("star.stl", density=20, infill_multiplier=2)]))
     assert settings.density == pytest.approx(0.4) and settings.meshes["star.stl"].density == pytest.approx(0.4)
+
+
+def test_cura_s_gradual_infill_steps_reach_the_pass():
+    settings, _ = build_settings(_snapshot([_model("star.stl", gradual_infill_steps=2)]))
+    assert settings.gradual_infill_steps == 2
+    settings, _ = build_settings(_snapshot([_model("star.stl")]))
+    assert settings.gradual_infill_steps == 0

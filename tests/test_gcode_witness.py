@@ -309,3 +309,17 @@ def test_lightning_keeps_cura_infill_and_says_so():
     assert report.layers_processed == 0 and any("lightning" in w for w in report.warnings)
     _, report = process_gcode(as_cura_list(_gcode([features] * 3)), ProcessSettings(density=0.1, infill_pattern="grid"))
     assert report.layers_processed == 3
+
+
+def test_gradual_infill_is_named_as_replaced_by_uniform_infill():
+    """Cura's gradual infill thins the infill below the top; the pass prints its full density everywhere,
+    and says so (from the footer of a saved file, or from Cura's settings in the plugin)."""
+    features, _ = _ring_layer(1)
+    text = _gcode([features] * 3, _footer({"infill_sparse_density": "20", "gradual_infill_steps": "2"}))
+    _, report = process_gcode(as_cura_list(text))
+    assert report.layers_processed == 3
+    assert any("gradual infill (2 steps)" in w and "Gradual Infill Steps to 0" in w for w in report.warnings)
+    _, report = process_gcode(as_cura_list(_gcode([features] * 3, _footer({"gradual_infill_steps": "0"}))))
+    assert not any("gradual" in w for w in report.warnings)
+    _, report = process_gcode(as_cura_list(_gcode([features] * 3)), ProcessSettings(gradual_infill_steps=1))
+    assert any("gradual infill (1 step)" in w for w in report.warnings)

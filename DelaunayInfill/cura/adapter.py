@@ -129,6 +129,7 @@ def build_settings(snapshot):
         seed=int(_number(primary.values.get("delaunay_infill_seed"), 0.0)),
         layout=str(primary.values.get("delaunay_infill_layout") or "seamless"),
         infill_pattern=str(primary.values.get("infill_pattern") or "") or None,
+        gradual_infill_steps=int(_number(primary.values.get("gradual_infill_steps"), 0.0)),
         meshes=meshes,
         process_unlisted_meshes=False,
         filament_diameter=_number(extruder.get("material_diameter")),

@@ -22,6 +22,7 @@ MESH_KEYS = (
     "infill_line_distance",
     "infill_overlap_mm",
     "infill_pattern",
+    "gradual_infill_steps",
     "infill_sparse_thickness",
     "speed_infill",
     "acceleration_infill",

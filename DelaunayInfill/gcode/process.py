@@ -455,6 +455,15 @@ class _Run:
             self.report.warnings.append(
                 "Cura's lightning infill kept: its lines do not show where infill may go. Choose another "
                 "infill pattern (grid, for one) in Cura to have it replaced")
+        steps = settings.gradual_infill_steps
+        if steps is None:
+            found = [self.footer.number("gradual_infill_steps", e) for e in range(max(1, len(self.footer.extruder_values)))]
+            steps = int(max([v for v in found if v is not None], default=0))
+        if steps > 0 and not self.keep_cura:
+            self.report.warnings.append(
+                f"Cura's gradual infill ({steps} step{'s' if steps > 1 else ''}) is replaced by uniform infill at its "
+                "full density, which uses more material than Cura's: set Gradual Infill Steps to 0, or a "
+                "lower infill density")
         self.lw_warned = False
         self.any_lw: float | None = None
         self.measured_lw: float | None = None

@@ -68,6 +68,9 @@ class ProcessSettings:
     # Cura's infill pattern of the print (None: from the G-code's settings footer, if it has one);
     # lightning infill is kept as Cura made it
     infill_pattern: str | None = None
+    # Cura's gradual_infill_steps (None: from the settings footer): the pass replaces gradual infill
+    # with uniform infill at the full density, and says so
+    gradual_infill_steps: int | None = None
 
     def validate(self) -> None:
         """Raise ValueError with a clear message for impossible values."""

@@ -13,6 +13,7 @@
 #   engine  tests/engine: real CuraEngine 4.13 slices (and 5.0 in a trixie chroot,
 #           scripts/cura5_chroot.sh), processed and checked independently
 #   gui     tests/gui: the real Cura 4.13 under Xvfb loads the plugin, slices, saves
+#   gui5    tests/gui/test_gui5_*.py: the same in the real Cura 5.0 (PyQt6) of the trixie chroot
 # A tier that cannot run fails; nothing is skipped.  Ends with one line "tests: N passed, M failed".
 set -u
 cd "$(dirname "$0")/.."
@@ -89,10 +90,12 @@ log "pytest [unit-newest] on the chroot's Python 3.13 (scripts/unit_newest.sh)"
 $SUDO bash scripts/unit_newest.sh "$RESULTS/unit-newest.xml" "${UNIT[@]}" || FAILED_STEPS+=("unit-newest (exit $?)")
 
 if [ "$WHAT" = all ]; then
-  need_apt cura-engine cura xvfb xauth imagemagick python3-zeroconf python3-pip iproute2 || FAILED_STEPS+=("apt-get install")
+  need_apt cura-engine cura xvfb xauth imagemagick python3-zeroconf python3-pip iproute2 xdotool || FAILED_STEPS+=("apt-get install")
   # tests/engine and the real-CuraEngine tests beside the unit tests (marked engine, left out above)
   run_pytest engine current tests -m engine --ignore=tests/gui
-  run_pytest gui current tests/gui
+  run_pytest gui current tests/gui --ignore-glob='*/test_gui5_*'
+  # the same GUI checks in the real Cura 5.0 (PyQt6) of the trixie chroot built above
+  run_pytest gui-cura5 current tests/gui/test_gui5_plugin.py tests/gui/test_gui5_regions.py tests/gui/test_gui5_paint.py
 fi
 
 # One closing line over every run.

@@ -110,6 +110,11 @@ def build_settings(snapshot):
             for r in snapshot.scene_regions
             if r.name in enabled_names
         ]
+    if getattr(snapshot, "painted_sets", None):  # painted sets come last: they win where they overlap
+        from .paint import painted_regions
+
+        enabled_models = {m.name for m in snapshot.meshes if m.enabled and not m.is_region}
+        regions += painted_regions(snapshot.painted_sets, enabled_models, lift)
 
     hop = _number(extruder.get("retraction_hop"), 0.0) if extruder.get("retraction_hop_enabled") else 0.0
     acceleration = _number(glob.get("machine_acceleration"), 3000.0)

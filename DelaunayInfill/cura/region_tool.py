@@ -58,6 +58,7 @@ from .region_shapes import (
     scene_to_gcode,
     shape_triangles,
 )
+from .paint_tool import PaintToolMixin
 
 PLUGIN_FOLDER = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -289,6 +290,90 @@ class _SetRegionMeshOperation(Operation):
         self._apply(*self._new)
 
 
+_REGION_NODE_CLASS = None
+
+
+def region_node_class():
+    """The scene-node class of the tool's regions (made once, inside Cura).
+
+    A region prints nothing of its own, so it must not count in the size Cura reports: under the
+    object list Cura shows the extent of every ``CuraSceneNode`` that has a mesh
+    (``CuraApplication.updatePlatformActivity``, Cura 4.13 to 5.x), modifiers included, so a 16 mm
+    region on the top face of a 12 mm slab made it "23.1 mm" tall. A region is therefore a plain
+    Uranium ``SceneNode`` (the model's own box already leaves it out: it is a non-printing mesh),
+    with the ``CuraSceneNode`` methods Cura calls on sliceable nodes (``isOutsideBuildArea``,
+    ``getPrintingExtruder``, ``getDiffuseColor``, ...) taken over from Cura's class of the running
+    version, the build-plate filter of ``isVisible``/``isSelectable``, and its own ``__deepcopy__``
+    (multiplying the model copies its regions as regions). It keeps its ``SettingOverrideDecorator``
+    (``infill_mesh``, its density), so CuraEngine and the Delaunay pass see it as before.
+    """
+    global _REGION_NODE_CLASS
+    if _REGION_NODE_CLASS is not None:
+        return _REGION_NODE_CLASS
+    from copy import deepcopy
+
+    from cura.CuraApplication import CuraApplication
+    from cura.Scene.CuraSceneNode import CuraSceneNode
+    from cura.Settings.SettingOverrideDecorator import SettingOverrideDecorator
+    from UM.Scene.SceneNode import SceneNode
+
+    def on_active_plate(node) -> bool:
+        plate = CuraApplication.getInstance().getMultiBuildPlateModel().activeBuildPlate
+        return node.callDecoration("getBuildPlateNumber") == plate
+
+    # Plain attributes CuraSceneNode.__init__ adds to SceneNode's (``_outside_buildarea``, and what
+    # later versions add), with their initial values.
+    probe, plain = CuraSceneNode(no_setting_override=True), SceneNode()
+    extra_attributes = {
+        key: value for key, value in vars(probe).items()
+        if key not in vars(plain) and isinstance(value, (bool, int, float, str, type(None)))
+    }
+
+    class DensityRegionNode(SceneNode):
+        def __init__(self, parent=None, visible: bool = True, name: str = "", no_setting_override: bool = False):
+            super().__init__(parent=parent, visible=visible, name=name)
+            for key, value in extra_attributes.items():
+                setattr(self, key, value)
+            self._outside_buildarea = False
+            if not no_setting_override:
+                self.addDecorator(SettingOverrideDecorator())
+
+        def isVisible(self) -> bool:
+            return super().isVisible() and on_active_plate(self)
+
+        def isSelectable(self) -> bool:
+            return super().isSelectable() and on_active_plate(self)
+
+        def __deepcopy__(self, memo):
+            copy = DensityRegionNode(no_setting_override=True)  # the decorators are copied below
+            copy.setTransformation(self.getLocalTransformation())
+            copy.setMeshData(self._mesh_data)
+            copy.setVisible(deepcopy(self._visible, memo))
+            copy.source_mime_type = deepcopy(self.source_mime_type, memo)
+            copy._selectable = deepcopy(self._selectable, memo)
+            copy._name = deepcopy(self._name, memo)
+            for key in ("_delaunay_region_shape", "_delaunay_region_size"):
+                if hasattr(self, key):
+                    setattr(copy, key, getattr(self, key))
+            for decorator in self._decorators:
+                copy.addDecorator(deepcopy(decorator, memo))
+            for child in self._children:
+                copy.addChild(deepcopy(child, memo))
+            self.calculateBoundingBoxMesh()
+            return copy
+
+    for name, value in vars(CuraSceneNode).items():
+        if name.startswith("__") or name in vars(DensityRegionNode) or not callable(value):
+            continue
+        code = getattr(value, "__code__", None)
+        if code is None or "__class__" in code.co_freevars:
+            continue  # a method calling super() works on CuraSceneNode instances only
+        setattr(DensityRegionNode, name, value)
+    DensityRegionNode.__qualname__ = DensityRegionNode.__name__
+    _REGION_NODE_CLASS = DensityRegionNode
+    return DensityRegionNode
+
+
 def _build_mesh(shape: str, size: float):
     triangles = shape_triangles(shape, size)
     builder = MeshBuilder()
@@ -297,7 +382,7 @@ def _build_mesh(shape: str, size: float):
     return builder.build()
 
 
-class DensityRegionTool(Tool):
+class DensityRegionTool(PaintToolMixin, Tool):
     """Left-toolbar tool: a click on the selected model adds a density region there."""
 
     def __init__(self):
@@ -329,6 +414,7 @@ class DensityRegionTool(Tool):
         self._refresh_timer.setSingleShot(True)
         self._refresh_timer.timeout.connect(self.propertyChanged.emit)
         _scene().sceneChanged.connect(self._onSceneChanged)
+        self._initPaint()  # paint mode: paint_tool.py
 
     # -- exposed properties (QML: UM.ActiveTool.properties.getValue("Name")) ------------------
 
@@ -441,12 +527,11 @@ class DensityRegionTool(Tool):
 
         Returns
         -------
-        The new CuraSceneNode, or None when there is no model to add to.
+        The new region node (:func:`region_node_class`), or None when there is no model to add to.
         """
         from cura.CuraApplication import CuraApplication
         from cura.Operations.SetParentOperation import SetParentOperation
         from cura.Scene.BuildPlateDecorator import BuildPlateDecorator
-        from cura.Scene.CuraSceneNode import CuraSceneNode
         from cura.Scene.SliceableObjectDecorator import SliceableObjectDecorator
 
         model = model if model is not None else self._selectedModel()
@@ -461,7 +546,7 @@ class DensityRegionTool(Tool):
         elif not isinstance(position, Vector):
             position = Vector(*(float(v) for v in position))
 
-        node = CuraSceneNode()
+        node = region_node_class()()  # not a CuraSceneNode: see region_node_class
         node.setName(region_name(next_region_number(n.getName() for n in DepthFirstIterator(_scene().getRoot()))))
         node.setSelectable(True)
         node.setCalculateBoundingBox(True)
@@ -548,6 +633,9 @@ class DensityRegionTool(Tool):
 
     def event(self, event):
         super().event(event)
+        painted = self._paintEvent(event)  # paint/erase mode (paint_tool.py)
+        if painted is not None:
+            return painted
         if event.type != Event.MousePressEvent or MouseEvent.LeftButton not in event.buttons:
             return False
         if not self._controller.getToolsEnabled():

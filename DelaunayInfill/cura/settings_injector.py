@@ -146,8 +146,10 @@ def make_settings_visible(preferences, keys, marker_preference: str = "delaunay_
     bool
         True when the visible-settings preference was changed.
     """
-    if preferences.getValue(marker_preference) is None:
-        preferences.addPreference(marker_preference, False)
+    # Registered first, unconditionally: asking Uranium for a preference nobody added logs
+    # "Tried to get the value of non-existing setting" on every start. addPreference keeps a value
+    # already read from cura.cfg (it only sets the default of a known preference).
+    preferences.addPreference(marker_preference, False)
     if preferences.getValue(marker_preference):
         return False
     current = preferences.getValue("general/visible_settings") or ""

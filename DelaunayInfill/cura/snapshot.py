@@ -132,6 +132,8 @@ class SceneSnapshot:
     #: installed (``region_tool.collect_scene_regions``); None: use the meshes' own triangles.
     scene_regions: list | None = None
     feather_mm: float = 0.0
+    #: Painted density sets of the models (``paint.PaintedSnapshot``, G-code coordinates), scene order.
+    painted_sets: list = field(default_factory=list)
 
     @property
     def enabled_meshes(self) -> list:
@@ -247,7 +249,21 @@ def take_snapshot(application, build_plate: int = 0) -> SceneSnapshot:
         region.enabled = any(_overlaps(region.bounds, model.bounds) for model in models)
     _resolve_duplicate_names(snapshot)
     _collect_tool_regions(snapshot)
+    _collect_painted_sets(snapshot, scene, build_plate)
     return snapshot
+
+
+def _collect_painted_sets(snapshot: SceneSnapshot, scene, build_plate: int) -> None:
+    """The models' painted sets (``paint_tool.collect_painted``); none when painting is unavailable."""
+    try:
+        from . import paint_tool
+
+        snapshot.painted_sets = paint_tool.collect_painted(sliceable_nodes(scene, build_plate), snapshot.global_values)
+    except Exception:
+        from UM.Logger import Logger
+
+        Logger.logException("w", "DelaunayInfill: could not read the painted density sets")
+        snapshot.painted_sets = []
 
 
 def _collect_tool_regions(snapshot: SceneSnapshot) -> None:

@@ -1,7 +1,8 @@
-"""GUI tier: the real Cura 4.13 under Xvfb (see cura_runner.py).
+"""GUI tier: the real Cura 4.13 (test_gui_*.py) and the real Cura 5.0 of the trixie
+chroot (test_gui5_*.py, the same tests on Cura 5.0 sessions) under Xvfb (see cura_runner.py).
 
 Nothing here skips: if Cura, Xvfb or ImageMagick are missing and cannot be
-installed, every GUI test fails with the reason.
+installed (for 5.0: the chroot cannot be built), every GUI test fails with the reason.
 """
 
 import os

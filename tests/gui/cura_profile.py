@@ -1,14 +1,15 @@
-"""A throw-away Cura 4.13 profile that starts straight into the main window.
+"""A throw-away Cura 4.13 or 5.0 profile that starts straight into the main window.
 
 Cura shows its welcome wizard only while no printer is active, and "What's
 new" only when ``last_run_version`` is older than the running version, so a
 profile with one printer and the current version skips both.  The printer is
 a Creality Ender-3 with the containers Cura 4.13 itself stores for it.
 
-Layout under ``home`` (Cura 4.13 on Linux):
-``.config/cura/4.13/cura.cfg`` (preferences), ``.local/share/cura/4.13/``
+Layout under ``home`` (Cura X.Y on Linux, X.Y = 4.13 or 5.0):
+``.config/cura/X.Y/cura.cfg`` (preferences), ``.local/share/cura/X.Y/``
 (``machine_instances/``, ``extruders/``, ``user/``, ``definition_changes/``,
-``plugins/``, ``cura.log``).
+``plugins/``, ``cura.log``).  Cura 5.0 stores the Ender-3 with the same
+container ids as 4.13; only the container format (``setting_version``) differs.
 """
 
 from __future__ import annotations
@@ -17,9 +18,11 @@ import urllib.parse
 import uuid
 from pathlib import Path
 
-CURA_SERIES = "4.13"
-SETTING_VERSION = 19  # Cura 4.13's container format
-PREFERENCES_VERSION = 7
+CURA_SERIES = "4.13"  # the default version
+#: Cura version -> (container format ``setting_version``, ``last_run_version`` that skips "What's new")
+VERSIONS = {"4.13": (19, "4.13.0"), "5.0": (20, "5.0.0")}
+SETTING_VERSION = VERSIONS[CURA_SERIES][0]
+PREFERENCES_VERSION = 7  # the same in 4.13 and 5.0
 
 ENDER3 = {
     "name": "Creality Ender-3",
@@ -32,16 +35,22 @@ ENDER3 = {
 }
 
 
-def data_dir(home: Path) -> Path:
-    return Path(home) / ".local" / "share" / "cura" / CURA_SERIES
+def _series(version: str) -> str:
+    if version not in VERSIONS:
+        raise ValueError(f"no profile layout for Cura {version!r}; known: {', '.join(VERSIONS)}")
+    return version
 
 
-def config_dir(home: Path) -> Path:
-    return Path(home) / ".config" / "cura" / CURA_SERIES
+def data_dir(home: Path, version: str = CURA_SERIES) -> Path:
+    return Path(home) / ".local" / "share" / "cura" / _series(version)
 
 
-def plugins_dir(home: Path) -> Path:
-    return data_dir(home) / "plugins"
+def config_dir(home: Path, version: str = CURA_SERIES) -> Path:
+    return Path(home) / ".config" / "cura" / _series(version)
+
+
+def plugins_dir(home: Path, version: str = CURA_SERIES) -> Path:
+    return data_dir(home, version) / "plugins"
 
 
 def _file_name(container_id: str) -> str:
@@ -55,8 +64,9 @@ def _ini(sections: dict) -> str:
     )
 
 
-def seed_profile(home: Path, *, width: int = 1600, height: int = 1000, preferences: dict | None = None) -> Path:
-    """Write a Cura 4.13 profile with an active Ender-3 under `home`.
+def seed_profile(home: Path, *, width: int = 1600, height: int = 1000, preferences: dict | None = None,
+                 version: str = CURA_SERIES) -> Path:
+    """Write a Cura 4.13 or 5.0 profile with an active Ender-3 under `home`.
 
     Parameters
     ----------
@@ -66,19 +76,22 @@ def seed_profile(home: Path, *, width: int = 1600, height: int = 1000, preferenc
         Main window size in pixels (placed at 0, 0).
     preferences : dict or None
         Extra ``{"section/key": value}`` preferences.
+    version : {"4.13", "5.0"}
+        The Cura whose folders and container format to write.
 
     Returns
     -------
     Path
         Cura's data folder in that profile.
     """
+    setting_version, run_version = VERSIONS[_series(version)]
     machine = ENDER3
     name = machine["name"]
     extruder_id = f"{machine['extruder_definition']} #1"
     prefs = {
         "general": {
             "version": PREFERENCES_VERSION,
-            "last_run_version": f"{CURA_SERIES}.0",
+            "last_run_version": run_version,
             "accepted_user_agreement": "True",
             "auto_slice": "False",
             "window_left": 0,
@@ -93,21 +106,21 @@ def seed_profile(home: Path, *, width: int = 1600, height: int = 1000, preferenc
         },
         "view": {"settings_visible": "True"},
         "info": {"asked_send_slice_info": "True", "send_slice_info": "False"},
-        "metadata": {"setting_version": SETTING_VERSION},
+        "metadata": {"setting_version": setting_version},
     }
     for key, value in (preferences or {}).items():
         section, _, entry = key.partition("/")
         prefs.setdefault(section, {})[entry] = value
 
-    config = config_dir(home)
-    data = data_dir(home)
+    config = config_dir(home, version)
+    data = data_dir(home, version)
     for folder in (config, data / "machine_instances", data / "extruders", data / "user",
                    data / "definition_changes", data / "plugins"):
         folder.mkdir(parents=True, exist_ok=True)
     (config / "cura.cfg").write_text(_ini(prefs), encoding="utf-8")
     (config / "plugins.json").write_text('{"disabled": [], "to_install": {}, "to_remove": []}', encoding="utf-8")
 
-    stack_meta = {"setting_version": SETTING_VERSION}
+    stack_meta = {"setting_version": setting_version}
     (data / "machine_instances" / f"{_file_name(name)}.global.cfg").write_text(_ini({
         "general": {"version": 5, "name": name, "id": name},
         "metadata": {**stack_meta, "type": "machine", "group_id": uuid.uuid4()},

@@ -1,9 +1,15 @@
-"""Run the real Cura 4.13 GUI headless with the plugin installed, and a job.
+"""Run the real Cura GUI headless with the plugin installed, and a job.
+
+Two Curas: ``version="4.13"`` (default) is Debian 12's Cura 4.13 (PyQt5) on this
+machine; ``version="5.0"`` is Debian trixie's Cura 5.0.0 (PyQt6, Uranium 5.0,
+CuraEngine 5.0, Python 3.13) in the chroot that ``scripts/cura5_chroot.sh``
+builds at /srv/trixie (its /tmp is the host's /tmp).
 
 One call of :func:`run_cura` does what a user's session does, automated:
 
-1. make sure Cura, Xvfb and ImageMagick are installed (``ensure_deps.sh``) and
-   that trimesh 3.9.36 is in a PYTHONPATH folder (Debian has no
+1. make sure Cura, Xvfb and ImageMagick are installed (``ensure_deps.sh``; for
+   5.0 the chroot, built or refreshed with ``scripts/cura5_chroot.sh``) and,
+   for 4.13, that trimesh 3.9.36 is in a PYTHONPATH folder (Debian 12 has no
    python3-trimesh; without it Cura pops up "could not be loaded" messages);
 2. build the ``.curapackage`` with the project's own packager and install the
    plugin from the package's ``files/plugins/DelaunayInfill`` into a fresh,
@@ -14,19 +20,32 @@ One call of :func:`run_cura` does what a user's session does, automated:
    (by PID: Cura, its CuraEngine child, Xvfb).
 
 Everything lands in the run's folder: ``status.json``, ``cura.log``,
-``cura.out``, the G-code and the screenshots the job asked for.
+``cura.out``, the G-code and the screenshots the job asked for.  Cura 5.0 sees
+only the chroot's files, so its session runs in a folder under /tmp: the job's
+paths under the run folder are mapped there, the files it reads (models, step
+files) are copied in, and the results are copied back into the run folder.
+
+Cura 5.0 at times crashes while it starts (about 1 start in 30: a ``KeyError``
+in ``ContainerRegistry._clearQueryCacheByContainer``, a race between the main
+thread and the build-plate mesh job, not caused by a plugin). A session that
+ended before Cura logged "Booting Cura took" is started again, up to
+``START_ATTEMPTS`` times; ``CuraRun.start_retries`` counts the retries, and the
+tests report them (a retry is never a pass by itself: the job must still run).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
+import shlex
 import shutil
 import signal
 import subprocess
 import sys
 import time
+import warnings
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +57,16 @@ SYSTEM_PYTHON = "/usr/bin/python3"
 TRIMESH = "trimesh==3.9.36"  # the version Cura pins
 REQUIRED_COMMANDS = ("cura", "Xvfb", "xauth")
 REQUIRED_FILES = ("/usr/bin/import", "/usr/bin/CuraEngine")
+VERSIONS = ("4.13", "5.0")
+CHROOT = Path(os.environ.get("DELAUNAY_CURA5_ROOT", "/srv/trixie"))
+CHROOT_SCRIPT = REPO / "scripts" / "cura5_chroot.sh"
+#: inside the chroot, for Cura 5.0 (qt6-svg-plugins: Debian's cura lacks it, and no icon loads without it)
+CHROOT_FILES = ("usr/bin/cura", "usr/bin/CuraEngine", "usr/bin/import", "usr/bin/python3",
+                "usr/lib/python3/dist-packages/PyQt6", "usr/lib/python3/dist-packages/shapely",
+                "usr/lib/python3/dist-packages/trimesh")
+CHROOT_TMP = Path("/tmp")  # bind-mounted at CHROOT/tmp: the same paths inside and outside
+START_ATTEMPTS = 3
+BOOTED = "Booting Cura took"
 
 sys.path.insert(0, str(HERE))
 from cura_profile import data_dir, plugins_dir, seed_profile  # noqa: E402
@@ -57,6 +86,8 @@ class CuraRun:
     cura_out: str
     seconds: float
     plugin_ids: list = field(default_factory=list)
+    version: str = "4.13"
+    start_retries: int = 0  # Cura 5.0 sessions started again after a crash before "Booting Cura took"
 
     @property
     def ok(self) -> bool:
@@ -179,6 +210,37 @@ def install_from_package(plugins: Path, build_dir: Path) -> Path:
     return package
 
 
+def _chroot_missing() -> list[str]:
+    missing = [str(CHROOT / f) for f in CHROOT_FILES if not (CHROOT / f).exists()]
+    if not missing:
+        # the host's /tmp must be bound at CHROOT/tmp (the run folder lives there)
+        probe = CHROOT_TMP / f".delaunay-chroot-probe-{os.getpid()}"
+        probe.write_text("probe")
+        try:
+            if not (CHROOT / "tmp" / probe.name).exists():
+                missing.append(f"{CHROOT}/tmp bound to the host's /tmp")
+        finally:
+            probe.unlink(missing_ok=True)
+    return missing
+
+
+def ensure_cura5() -> None:
+    """The trixie chroot with Cura 5.0, built or refreshed with scripts/cura5_chroot.sh, or raise."""
+    for tool in ("Xvfb", "chroot"):
+        if shutil.which(tool) is None and not os.path.exists(f"/usr/sbin/{tool}"):
+            raise CuraTierError(f"the Cura 5.0 GUI tier needs {tool} on the host")
+    if not _chroot_missing():
+        return
+    if os.geteuid() != 0:
+        raise CuraTierError(f"the Cura 5.0 GUI tier needs root (chroot {CHROOT}); missing: {_chroot_missing()}")
+    result = subprocess.run(["bash", str(CHROOT_SCRIPT), "--root", str(CHROOT)], capture_output=True, text=True,
+                            check=False)
+    still = _chroot_missing()
+    if still:
+        raise CuraTierError(f"the Cura 5.0 chroot is incomplete ({', '.join(still)}); {CHROOT_SCRIPT.name} said:\n"
+                            f"{result.stdout[-2000:]}\n{result.stderr[-2000:]}")
+
+
 def _cura_command() -> list[str]:
     """``cura``, in a network namespace of its own when the machine allows one.
 
@@ -186,12 +248,54 @@ def _cura_command() -> list[str]:
     to use one of those ports makes the bind fail, and Cura 4.13 at times crashes natively on that
     path. A private loopback makes every session start on a clean port range.
     """
-    isolated = ["unshare", "--net", "sh", "-c", "ip link set lo up && exec cura"]
+    return _isolated("exec cura", ["cura"])
+
+
+def _isolated(inner: str, fallback: list[str]) -> list[str]:
+    isolated = ["unshare", "--net", "sh", "-c", f"ip link set lo up && {inner}"]
     if shutil.which("unshare") and shutil.which("ip"):
         probe = subprocess.run(isolated[:-1] + ["ip link set lo up"], capture_output=True, check=False)
         if probe.returncode == 0:
             return isolated
-    return ["cura"]
+    return fallback
+
+
+def _cura5_command(env: dict) -> list[str]:
+    """Cura 5.0 in the chroot, with a clean environment (the host's variables mean nothing there)."""
+    chroot = shutil.which("chroot") or "/usr/sbin/chroot"
+    command = [chroot, str(CHROOT), "/usr/bin/env", "-i"] + [f"{k}={v}" for k, v in sorted(env.items())] + ["cura"]
+    return _isolated("exec " + " ".join(shlex.quote(c) for c in command), command)
+
+
+def _work_folder(folder: Path) -> Path:
+    """Where a Cura 5.0 session of `folder` runs: under /tmp, which the chroot shares."""
+    digest = hashlib.sha1(str(folder).encode()).hexdigest()[:10]
+    return CHROOT_TMP / f"delaunay-gui5-{folder.name}-{digest}"
+
+
+def _map_job(job, folder: Path, work: Path, inputs: Path):
+    """The job with paths under `folder` moved to `work`, and other files it names copied to `inputs`."""
+    copied: dict[str, str] = {}
+
+    def walk(value):
+        if isinstance(value, dict):
+            return {k: walk(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [walk(v) for v in value]
+        if not isinstance(value, str) or not value.startswith("/"):
+            return value
+        if value == str(folder) or value.startswith(str(folder) + "/"):
+            return str(work) + value[len(str(folder)):]
+        if value.startswith(str(CHROOT_TMP) + "/") or not os.path.isfile(value):
+            return value
+        if value not in copied:
+            target = inputs / str(len(copied)) / os.path.basename(value)  # the name stays: Cura names models by it
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(value, target)
+            copied[value] = str(target)
+        return copied[value]
+
+    return walk(job)
 
 
 def _free_display() -> int:
@@ -225,7 +329,8 @@ def _stop(process: subprocess.Popen, grace_s: float = 15.0) -> None:
 
 
 def run_cura(job: dict, folder: Path, *, timeout_s: float = 300.0, extra_plugins=(), geometry=(1600, 1000),
-             install_plugin: bool = True, fresh: bool = True) -> CuraRun:
+             install_plugin: bool = True, fresh: bool = True, version: str = "4.13",
+             extra_env: dict | None = None) -> CuraRun:
     """Run one Cura session with the plugin (from the .curapackage) and the driver.
 
     Parameters
@@ -235,33 +340,46 @@ def run_cura(job: dict, folder: Path, *, timeout_s: float = 300.0, extra_plugins
     folder : Path
         Output folder of this run (profile, logs, screenshots).
     timeout_s : float
-        Hard limit for the whole session.
+        Hard limit for the whole session (per start, for Cura 5.0).
     install_plugin : bool
         Install the plugin from the built .curapackage's ``files/plugins`` (False: leave the
         profile's plugins as they are, e.g. to let Cura install a dropped package).
     fresh : bool
         Start from an empty folder and a newly seeded profile (False: reuse the folder's
         profile from an earlier session, as a restarted Cura does).
+    version : {"4.13", "5.0"}
+        Which Cura: the host's 4.13 or the chroot's 5.0.
+    extra_env : dict or None
+        More environment for Cura, e.g. ``{"QT_FONT_DPI": "144"}`` (a larger font).
 
     Returns
     -------
     CuraRun
     """
-    ensure_dependencies()
+    if version not in VERSIONS:
+        raise ValueError(f"unknown Cura version {version!r}; use one of {', '.join(VERSIONS)}")
     folder = Path(folder).resolve()
-    home = folder / "home"
-    if fresh and folder.exists():
-        shutil.rmtree(folder)
+    if version == "4.13":
+        ensure_dependencies()
+        work = folder
+    else:
+        ensure_cura5()
+        work = _work_folder(folder)
+    home = work / "home"
+    if fresh:
+        for path in {folder, work}:
+            if path.exists():
+                shutil.rmtree(path)
     folder.mkdir(parents=True, exist_ok=True)
+    work.mkdir(parents=True, exist_ok=True)
     for stale in ("status.json", "job.json", "cura.log", "cura.out"):
-        (folder / stale).unlink(missing_ok=True)
-    pydeps = ensure_pydeps(REPO / "test-artifacts" / "gui" / "_pydeps")
+        (work / stale).unlink(missing_ok=True)
+    pydeps = ensure_pydeps(REPO / "test-artifacts" / "gui" / "_pydeps") if version == "4.13" else None
     if fresh or not home.exists():
-        seed_profile(home, width=geometry[0], height=geometry[1])
-    (data_dir(home) / "cura.log").unlink(missing_ok=True)
-    plugins = plugins_dir(home)
+        seed_profile(home, width=geometry[0], height=geometry[1], version=version)
+    plugins = plugins_dir(home, version)
     if install_plugin:
-        install_from_package(plugins, folder / "dist")
+        install_from_package(plugins, work / "dist")
     if (plugins / DRIVER.name).exists():
         shutil.rmtree(plugins / DRIVER.name)
     shutil.copytree(DRIVER, plugins / DRIVER.name)
@@ -270,21 +388,77 @@ def run_cura(job: dict, folder: Path, *, timeout_s: float = 300.0, extra_plugins
             shutil.rmtree(plugins / Path(extra).name)
         shutil.copytree(extra, plugins / Path(extra).name)
 
-    job = dict(job)
-    job["status"] = str(folder / "status.json")
+    job = dict(job) if version == "4.13" else _map_job(dict(job), folder, work, work / "inputs")
+    job["status"] = str(work / "status.json")
     job.setdefault("timeout_s", timeout_s - 30)
-    job_path = folder / "job.json"
+    job_path = work / "job.json"
     job_path.write_text(json.dumps(job, indent=1), encoding="utf-8")
 
-    display = _free_display()
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("XDG_", "PYTHON", "QT_"))}
-    env.update(
-        HOME=str(home), DISPLAY=f":{display}", DELAUNAY_GUI_JOB=str(job_path), PYTHONPATH=str(pydeps),
+    env = dict(
+        HOME=str(home), DELAUNAY_GUI_JOB=str(job_path),
         XDG_CONFIG_HOME=str(home / ".config"), XDG_DATA_HOME=str(home / ".local" / "share"),
         XDG_CACHE_HOME=str(home / ".cache"), LC_ALL="C.UTF-8",
     )
-    xvfb_log = open(folder / "xvfb.log", "w")  # noqa: SIM115 - closed in finally
-    cura_out = open(folder / "cura.out", "w")  # noqa: SIM115
+    if version == "4.13":
+        env = {**{k: v for k, v in os.environ.items() if not k.startswith(("XDG_", "PYTHON", "QT_"))}, **env,
+               "PYTHONPATH": str(pydeps)}
+    else:
+        # USER: Cura 5.0's removable-drive plugin builds "/run/media/" + $USER and its thread dies without it
+        env.update(USER=os.environ.get("USER") or "root", LANG="C.UTF-8", PATH="/usr/bin:/bin")
+    env.update(extra_env or {})
+
+    started = time.monotonic()
+    retries = 0
+    for attempt in range(START_ATTEMPTS if version != "4.13" else 1):
+        (data_dir(home, version) / "cura.log").unlink(missing_ok=True)
+        (work / "status.json").unlink(missing_ok=True)
+        status = _session(work, env, version, timeout_s, geometry)
+        cura_out = (work / "cura.out").read_text(errors="replace")
+        if version == "4.13" or BOOTED in cura_out or status.get("ok") is True or attempt == START_ATTEMPTS - 1:
+            break
+        retries += 1  # crashed while starting (see the module docstring): start it again
+        (work / f"cura.out.start{attempt + 1}").write_text(cura_out)
+    log_path = data_dir(home, version) / "cura.log"
+    cura_log = log_path.read_text(errors="replace") if log_path.exists() else ""
+    (work / "cura.log").write_text(cura_log)
+    if not status:
+        status = {"ok": False, "error": "Cura wrote no status (did the driver plugin load?)"}
+    if work != folder:
+        _copy_back(work, folder)
+    if retries:
+        # reported, never hidden: pytest lists it in its warnings summary, and the run folder keeps the crashes
+        warnings.warn(f"Cura {version} crashed while starting ({retries} of {retries + 1} starts) in {folder.name}; "
+                      f"started again (see cura.out.start*)", RuntimeWarning, stacklevel=2)
+    return CuraRun(
+        folder=folder,
+        status=status,
+        cura_log=cura_log,
+        cura_out=cura_out,
+        seconds=time.monotonic() - started,
+        version=version,
+        start_retries=retries,
+    )
+
+
+def _copy_back(work: Path, folder: Path) -> None:
+    """The session's results (not its profile, not the copied inputs) into the run folder."""
+    for item in work.iterdir():
+        if item.name in ("home", "inputs", "dist"):
+            continue
+        target = folder / item.name
+        if item.is_dir():
+            shutil.copytree(item, target, dirs_exist_ok=True)
+        else:
+            shutil.copy2(item, target)
+
+
+def _session(work: Path, env: dict, version: str, timeout_s: float, geometry) -> dict:
+    """One start of Cura with the job: Xvfb, Cura, wait for the driver's status, stop both."""
+    display = _free_display()
+    env = {**env, "DISPLAY": f":{display}"}
+    command = _cura_command() if version == "4.13" else _cura5_command(env)
+    xvfb_log = open(work / "xvfb.log", "w")  # noqa: SIM115 - closed in finally
+    cura_out = open(work / "cura.out", "w")  # noqa: SIM115
     xvfb = subprocess.Popen(
         ["Xvfb", f":{display}", "-screen", "0", f"{geometry[0]}x{geometry[1]}x24", "-nolisten", "tcp"],
         stdout=xvfb_log, stderr=subprocess.STDOUT,
@@ -292,15 +466,16 @@ def run_cura(job: dict, folder: Path, *, timeout_s: float = 300.0, extra_plugins
     cura = None
     started = time.monotonic()
     status: dict = {}
-    status_path = folder / "status.json"
+    status_path = work / "status.json"
     try:
         for _ in range(100):
             if os.path.exists(f"/tmp/.X11-unix/X{display}"):
                 break
             if xvfb.poll() is not None:
-                raise CuraTierError(f"Xvfb :{display} exited: {(folder / 'xvfb.log').read_text()[-500:]}")
+                raise CuraTierError(f"Xvfb :{display} exited: {(work / 'xvfb.log').read_text()[-500:]}")
             time.sleep(0.1)
-        cura = subprocess.Popen(_cura_command(), env=env, stdout=cura_out, stderr=subprocess.STDOUT, cwd=folder)
+        cura = subprocess.Popen(command, env=env if version == "4.13" else {"PATH": os.environ.get("PATH", "")},
+                                stdout=cura_out, stderr=subprocess.STDOUT, cwd=work)
         while time.monotonic() - started < timeout_s:
             if status_path.exists():
                 try:
@@ -329,15 +504,4 @@ def run_cura(job: dict, folder: Path, *, timeout_s: float = 300.0, extra_plugins
             status = {**json.loads(status_path.read_text()), **({"ok": False} if status.get("ok") is False else {})}
         except ValueError:
             pass
-    log_path = data_dir(home) / "cura.log"
-    cura_log = log_path.read_text(errors="replace") if log_path.exists() else ""
-    (folder / "cura.log").write_text(cura_log)
-    if not status:
-        status = {"ok": False, "error": "Cura wrote no status (did the driver plugin load?)"}
-    return CuraRun(
-        folder=folder,
-        status=status,
-        cura_log=cura_log,
-        cura_out=(folder / "cura.out").read_text(errors="replace"),
-        seconds=time.monotonic() - started,
-    )
+    return status

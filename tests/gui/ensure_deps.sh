@@ -4,9 +4,10 @@
 # (/usr/bin/import for screenshots), python3-zeroconf (else UM3NetworkPrinting pops up
 # "could not be loaded") and python3-pip (to put trimesh 3.9.36 on Cura's PYTHONPATH).
 # iproute2: `ip` brings up the loopback of the network namespace each Cura session runs in.
+# xdotool: the real mouse drags and clicks of the region and paint tests.
 # Needs root or sudo. Exit status 0 when everything is there afterwards.
 set -euo pipefail
-PACKAGES=(cura cura-engine xvfb xauth imagemagick python3-zeroconf python3-pip iproute2)
+PACKAGES=(cura cura-engine xvfb xauth imagemagick python3-zeroconf python3-pip iproute2 xdotool)
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

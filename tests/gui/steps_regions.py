@@ -263,7 +263,7 @@ def show_single_layer(ctx, layer: int):
     yield 1.0
 
 
-def _qml_object(ctx, name: str):
+def _qml_object(ctx, name: str, within: str = "regionList"):
     """A QML object of Cura's main window by objectName (the tool panel's fields and buttons).
 
     Repeater delegates are only in the visual tree (``childItems``), not among the
@@ -281,7 +281,7 @@ def _qml_object(ctx, name: str):
     found = window.findChild(QObject, name)
     if found is not None:
         return found
-    region_list = window.findChild(QObject, "regionList")
+    region_list = window.findChild(QObject, within)  # the list whose delegates are looked through
     pending = [region_list] if region_list is not None else []
     while pending:
         obj = pending.pop()
@@ -427,3 +427,185 @@ def edit_shape_and_undo(ctx, name: str, shape: str, size: float):
     yield 0.5
     steps["undone"] = state()
     ctx.record("shape_edit", steps)
+
+
+def record_sizes(ctx, model: str, key: str):
+    """Record the size Cura reports: the scene's (under the object list), the model's box, the Scale tool's.
+
+    Cura recomputes the scene's size 100 ms after a change; the step waits for it to settle.
+    """
+    from UM.Scene.Selection import Selection
+
+    yield 1.0
+    node = ctx.node(model)
+    box = node.getBoundingBox()
+    Selection.clear()
+    Selection.add(node)
+    yield 0.3
+    scale = ctx.app.getController().getTool("ScaleTool")
+    ctx.record(key, {
+        "scene": ctx.app.getSceneBoundingBoxString,
+        "model": [round(float(box.width), 2), round(float(box.height), 2), round(float(box.depth), 2)],
+        "scale_tool": [round(float(scale.getObjectWidth()), 2), round(float(scale.getObjectHeight()), 2),
+                       round(float(scale.getObjectDepth()), 2)] if scale is not None else None,
+        "region_classes": sorted({type(n).__name__ for n in _plugin_module("region_tool").region_nodes()}),
+    })
+
+
+def _item(ctx, obj):
+    qt = _qt()
+    return qt["sip"].cast(obj, qt["QQuickItem"])
+
+
+def _panel(ctx):
+    panel = _qml_object(ctx, "densityRegionsPanel")
+    if panel is None:
+        raise RuntimeError("the Density regions panel is not in the window")
+    return _item(ctx, panel)
+
+
+def panel_layout(ctx, key: str = "panel_layout"):
+    """Record where the panel's controls are, against the panel's own width (scene pixels).
+
+    Every visible item inside the panel with a size is measured; ``outside`` lists the ones
+    whose box reaches past the panel's left or right edge (more than half a pixel).  Also
+    recorded: which of Cura's styled controls the fields and buttons are (a property only
+    Cura's own control has), the theme's default font and em size.
+    """
+    qt = _qt()
+    yield 0.8
+    panel = _panel(ctx)
+    origin = panel.mapToScene(qt["QPointF"](0, 0))
+    left, right = origin.x(), origin.x() + panel.width()
+    outside, measured = [], 0
+    pending = list(panel.childItems())
+    while pending:
+        item = pending.pop()
+        pending.extend(item.childItems())
+        if not item.isVisible() or item.width() <= 0 or item.height() <= 0:
+            continue
+        corner = item.mapToScene(qt["QPointF"](0, 0))
+        x0, x1 = corner.x(), corner.x() + item.width()
+        if item.inherits("QQuickText"):
+            # a label's box may be wider than its text (Cura.ComboBox's label reaches left past its
+            # box, behind its padding): what counts is where the text is painted
+            pad_left, pad_right = float(item.property("leftPadding") or 0), float(item.property("rightPadding") or 0)
+            x0 = corner.x() + pad_left
+            x1 = x0 + min(float(item.property("contentWidth") or 0), item.width() - pad_left - pad_right)
+        measured += 1
+        if x0 < left - 0.5 or x1 > right + 0.5:
+            chain, parent = [], item.parentItem()
+            while parent is not None and parent is not panel and len(chain) < 4:
+                chain.append(parent.objectName() or parent.metaObject().className())
+                parent = parent.parentItem()
+            text = item.property("text") if item.inherits("QQuickText") else None
+            outside.append([item.objectName() or item.metaObject().className(), round(x0, 1), round(x1, 1),
+                            text, chain])
+
+    def styled(name, prop):
+        obj = _qml_object(ctx, name)
+        return obj is not None and obj.property(prop) is not None
+
+    theme_font = None
+    try:
+        from UM.Qt.Bindings.Theme import Theme
+
+        theme = Theme.getInstance()
+        theme_font = {"point_size": theme.getFont("default").pointSize(), "em": theme.getSize("line").height()}
+    except Exception as error:  # the record says why
+        theme_font = {"error": repr(error)}
+    ctx.record(key, {
+        "panel": [round(left, 1), round(right, 1), round(panel.height(), 1)],
+        "measured": measured,
+        "outside": outside,
+        "styled": {
+            "newShape": styled("newShape", "defaultTextOnEmptyModel"),  # Cura.ComboBox
+            "newSize": styled("newSize", "leftIcon"),  # Cura.TextField
+            "densityField1": styled("densityField1", "leftIcon"),
+            "addRegionButton": styled("addRegionButton", "fixedWidthMode"),  # Cura.ActionButton
+            "deleteRegion1": styled("deleteRegion1", "iconSource"),  # UM.SimpleButton
+        },
+        "font": theme_font,
+    })
+
+
+def _qobject_children(obj, class_part: str) -> list:
+    """QObject descendants of `obj` whose class name contains `class_part` (QQuickPopup is no PyQt type)."""
+    from importlib import import_module
+
+    core = import_module(_qt()["QPointF"].__module__)
+    return [child for child in obj.findChildren(core.QObject) if class_part in child.metaObject().className()]
+
+
+def choose_in_combobox(ctx, name: str, index: int):
+    """Pick entry `index` of the panel's combo box `name` as a user does: open it, click the entry.
+
+    Emits the combo box's ``activated(index)``, i.e. runs the panel's handler.
+    """
+    qt = _qt()
+    yield ctx.wait_until(lambda: _qml_object(ctx, name) is not None, 10, f"the panel's {name}")
+    combo = _qml_object(ctx, name)
+    _click(ctx, combo)
+    yield 0.6
+    popups = [p for p in _qobject_children(combo, "Popup") if p.inherits("QQuickPopup") and p.property("visible")]
+    if not popups:
+        raise RuntimeError(f"{name}: a click did not open its list")
+    entries = []
+    for view in _qobject_children(popups[0], "ListView"):
+        if not view.inherits("QQuickListView") or not isinstance(view, qt["QQuickItem"]):
+            continue  # e.g. the ListView attached objects of the delegates
+        pending = list(view.childItems())
+        while pending:
+            item = pending.pop()
+            pending.extend(item.childItems())
+            if item.inherits("QQuickAbstractButton") and item.isVisible():  # ItemDelegate
+                entries.append(item)
+    entries.sort(key=lambda item: item.mapToScene(qt["QPointF"](0, 0)).y())
+    if len(entries) <= index:
+        raise RuntimeError(f"{name}: its open list has {len(entries)} entries, not {index + 1}")
+    _click(ctx, entries[index])
+    yield 0.6
+
+
+def panel_comboboxes(ctx, region: str = "1"):
+    """Use the panel's combo boxes: the shape of the next region, then a region's shape (undone).
+
+    Records ``panel_comboboxes``: the tool's shape and the rows' shapes after each step.
+    """
+    tool = _tool(ctx)
+
+    def rows():
+        return [[row["label"], row["shape"]] for row in tool.getRegions()]
+
+    out = {"shape_before": tool.getShape()}
+    yield from choose_in_combobox(ctx, "newShape", 1)
+    out["shape_chosen"] = tool.getShape()
+    out["rows_before"] = rows()
+    yield from choose_in_combobox(ctx, "shapeField" + region, 2)
+    out["rows_edited"] = rows()
+    ctx.app.getOperationStack().undo()
+    yield 0.5
+    out["rows_undone"] = rows()
+    tool.setShape(out["shape_before"])
+    ctx.record("panel_comboboxes", out)
+
+
+def copy_model(ctx, model: str, key: str = "model_copy"):
+    """Deep-copy the model as Cura's Multiply and Copy/Paste do; record what its regions became."""
+    from copy import deepcopy
+
+    node = ctx.node(model)
+    copy = deepcopy(node)
+    children = []
+    for child in copy.getChildren():
+        stack = child.callDecoration("getStack")
+        children.append({
+            "class": type(child).__name__,
+            "name": child.getName(),
+            "infill_mesh": bool(stack.getProperty("infill_mesh", "value")) if stack else None,
+            "density": float(stack.getProperty("infill_sparse_density", "value")) if stack else None,
+            "shape": getattr(child, "_delaunay_region_shape", None),
+        })
+    ctx.record(key, {"class": type(copy).__name__, "children": children})
+    if False:
+        yield

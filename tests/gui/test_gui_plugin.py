@@ -62,6 +62,7 @@ def _job(run, models_):
             {"do": "slice"},
             {"do": "wait_processed", "expect": False, "settle_s": 4},
             {"do": "save", "path": f"{out}/star_off.gcode"},
+            {"do": "dump_engine_gcode", "path": f"{out}/star_off_engine.gcode"},
             # 3. save right after the slice, before the background job could finish
             {"do": "settings", "values": {"delaunay_infill_enabled": True, "delaunay_infill_seed": 7}},
             {"do": "slice"},
@@ -73,6 +74,7 @@ def _job(run, models_):
             {"do": "step", "file": steps, "function": "wait_for_message",
              "args": {"contains": "could not process", "record": "failure_messages"}},
             {"do": "save", "path": f"{out}/star_failed.gcode"},
+            {"do": "dump_engine_gcode", "path": f"{out}/star_failed_engine.gcode"},
             {"do": "step", "file": steps, "function": "restore_pipeline"},
             # 5. per model: only the star has it on; the cube keeps Cura's infill
             {"do": "settings", "values": {"delaunay_infill_enabled": False, "delaunay_infill_seed": 0}},
@@ -93,11 +95,15 @@ def _job(run, models_):
     }
 
 
+def start_session(gui_artifacts, gui_models, version: str = "4.13", name: str = "plugin"):
+    """The plugin session in Cura `version` (test_gui5_plugin.py runs it in Cura 5.0)."""
+    folder = gui_artifacts / name
+    return run_cura(_job(folder, gui_models), folder, timeout_s=420, version=version)
+
+
 @pytest.fixture(scope="module")
 def session(gui_artifacts, gui_models):
-    folder = gui_artifacts / "plugin"
-    run = run_cura(_job(folder, gui_models), folder, timeout_s=420)
-    return run
+    return start_session(gui_artifacts, gui_models)
 
 
 def _read(run, name) -> str:
@@ -195,8 +201,34 @@ def test_saved_gcode_has_delaunay_infill_that_passes_the_engine_checks(session):
 def test_setting_off_gives_curas_own_gcode(session):
     off = _read(session, "star_off.gcode")
     assert MARKER not in off
-    # Same model and settings apart from ours (which CuraEngine ignores): byte for byte Cura's G-code.
-    assert _body(off) == _read(session, "star_cura.gcode")
+    # byte for byte the G-code CuraEngine and Cura made for this slice
+    assert _body(off) == _read(session, "star_off_engine.gcode")
+    # and, apart from the infill, the slice of the same model and settings with the setting on.
+    # (CuraEngine 4.13 gives equal G-code for equal settings; CuraEngine 5.0 does not always: two of
+    # its slices may differ in a wall vertex or two, and the absolute E after it in the last digit.)
+    on = _read(session, "star_cura.gcode")
+    if session.version == "4.13":
+        assert _body(off) == on
+    else:
+        differing, total = _lines_differing(_body(off), on)
+        assert differing <= max(3, total // 1000), f"{differing} of {total} lines differ beyond the last digit of E"
+
+
+def _lines_differing(a: str, b: str) -> tuple[int, int]:
+    """Lines of two G-code texts that differ other than by E in its last digits (<= 0.001 mm)."""
+    lines_a, lines_b = a.splitlines(), b.splitlines()
+    assert len(lines_a) == len(lines_b), (len(lines_a), len(lines_b))
+    differing = 0
+    for x, y in zip(lines_a, lines_b):
+        if x == y:
+            continue
+        words_x, words_y = x.split(";", 1)[0].split(), y.split(";", 1)[0].split()
+        same = len(words_x) == len(words_y) and all(
+            u == v or (u[0] == v[0] == "E" and abs(float(u[1:]) - float(v[1:])) <= 1e-3)
+            for u, v in zip(words_x, words_y)
+        )
+        differing += not same
+    return differing, len(lines_a)
 
 
 def test_turning_the_setting_off_triggers_a_reslice(session):
@@ -254,7 +286,7 @@ def test_a_failing_pass_shows_a_message_and_keeps_curas_gcode(session):
     assert "test: the G-code pass is broken" in shown[0] and "Cura's own infill" in shown[0], shown[0]
     failed = _read(session, "star_failed.gcode")
     assert MARKER not in failed
-    assert _body(failed) == _body(_read(session, "star_off.gcode"))
+    assert _body(failed) == _read(session, "star_failed_engine.gcode")
 
 
 def test_a_cura_without_shapely_gets_one_plain_message(session):
@@ -262,3 +294,9 @@ def test_a_cura_without_shapely_gets_one_plain_message(session):
     assert texts is not None, session.failure()
     assert len(texts) == 1, texts
     assert "shapely" in texts[0] and "Cura's own infill is used" in texts[0], texts[0]
+
+
+def test_start_up_logs_no_warning_about_the_plugins_preferences(session):
+    """Uranium warns "Tried to get the value of non-existing setting" for a preference read before it is added."""
+    lines = [line for line in session.cura_log.splitlines() if "non-existing setting delaunay_infill" in line]
+    assert not lines, "\n".join(lines[:5])

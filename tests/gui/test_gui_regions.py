@@ -58,15 +58,19 @@ def _job(folder: Path, slab: str, pms_box: str) -> dict:
         "actions": [
             {"do": "settings", "values": {"delaunay_infill_enabled": True, "infill_sparse_density": BASE}},
             {"do": "load", "file": slab},
+            _step("record_sizes", model=MODEL, key="sizes_before"),
             _step("select_tool", model=MODEL),
             _step("add_regions", model=MODEL, regions=[dict(SPHERE, density=SPHERE_FIRST_DENSITY)]),
             _step("click_region", model=MODEL, **CLICK),
             _step("check_undo"),
             _step("use_panel", region="1", density=SPHERE["density"]),
+            _step("panel_comboboxes", region="1"),
             _step("edit_shape_and_undo", name="DelaunayRegion_1", shape="cube", size=12.0),
+            _step("record_sizes", model=MODEL, key="sizes_with_regions"),
             {"do": "load", "file": pms_box, "settings": PMS_SETTINGS, "offset": PMS_OFFSET},
             _step("select_tool", model=MODEL),
             _step("record_regions", model=MODEL),
+            _step("panel_layout"),
             {"do": "camera", "position": [28, 110, 150], "look_at": [28, 0, 0]},
             {"do": "screenshot", "path": f"{out}/regions-panel.png", "delay_s": 2},
             {"do": "slice", "timeout_s": 180},
@@ -90,15 +94,54 @@ def _job(folder: Path, slab: str, pms_box: str) -> dict:
     }
 
 
-@pytest.fixture(scope="module")
-def session(gui_artifacts):
-    folder = gui_artifacts / "regions"  # run_cura starts it afresh
+def start_session(gui_artifacts, version: str = "4.13", name: str = "regions"):
+    """The region session in Cura `version` (test_gui5_regions.py runs it in Cura 5.0)."""
+    folder = gui_artifacts / name  # run_cura starts it afresh
     slab = gui_artifacts / "models" / MODEL
     slab.parent.mkdir(parents=True, exist_ok=True)
     models.write_stl(slab, models.box(*SLAB))
     pms_box = slab.parent / PMS
     models.write_stl(pms_box, models.box(*PMS_BOX))
-    return run_cura(_job(folder, str(slab), str(pms_box)), folder, timeout_s=600)
+    return run_cura(_job(folder, str(slab), str(pms_box)), folder, timeout_s=600, version=version)
+
+
+@pytest.fixture(scope="module")
+def session(gui_artifacts):
+    return start_session(gui_artifacts)
+
+
+LARGE_FONT = 1.5  # the application font times this: Cura's fonts and its em-based sizes grow with it
+
+
+def start_large_font_session(gui_artifacts, version: str = "4.13", name: str = "regions-large-font"):
+    """A short session with a larger font: the panel with three rows, measured and photographed."""
+    folder = gui_artifacts / name
+    slab, pms_box = gui_artifacts / "models" / MODEL, gui_artifacts / "models" / PMS
+    slab.parent.mkdir(parents=True, exist_ok=True)
+    models.write_stl(slab, models.box(*SLAB))
+    models.write_stl(pms_box, models.box(*PMS_BOX))
+    job = {
+        "actions": [
+            {"do": "settings", "values": {"delaunay_infill_enabled": True, "infill_sparse_density": BASE}},
+            {"do": "load", "file": str(slab)},
+            {"do": "load", "file": str(pms_box), "settings": PMS_SETTINGS, "offset": PMS_OFFSET},
+            _step("select_tool", model=MODEL),
+            _step("add_regions", model=MODEL, regions=[SPHERE, dict(CLICK, offset=[21.0, 0.0], z=6.0)]),
+            _step("select_tool", model=MODEL),
+            _step("panel_layout", key="panel_layout_large"),
+            _step("copy_model", model=MODEL),
+            {"do": "camera", "position": [28, 110, 150], "look_at": [28, 0, 0]},
+            {"do": "screenshot", "path": f"{folder}/regions-panel-large-font.png", "delay_s": 2},
+        ],
+        "quit": True,
+        "font_scale": LARGE_FONT,
+    }
+    return run_cura(job, folder, timeout_s=240, version=version)
+
+
+@pytest.fixture(scope="module")
+def large_font_session(gui_artifacts):
+    return start_large_font_session(gui_artifacts)
 
 
 @pytest.fixture(scope="module")
@@ -179,10 +222,11 @@ def test_cura_ran_the_whole_session(session):
     assert not errors, "cura.log has errors from the plugin:\n" + "\n\n".join(errors[:5])
 
 
-def test_tool_is_in_the_toolbar_with_the_qt5_panel(records):
+def test_tool_is_in_the_toolbar_with_the_panel_of_its_qt(session, records):
     meta = records["tool_metadata"]
     assert meta["name"] == "Density regions"
-    assert meta["tool_panel"] == "qml/qt5/DensityRegionsPanel.qml"
+    qt = {"4.13": 5, "5.0": 6}[session.version]
+    assert meta["tool_panel"] == f"qml/qt{qt}/DensityRegionsPanel.qml"
     assert (REPO / meta["tool_panel"]).exists() and (REPO / meta["icon"]).exists()
 
 
@@ -358,3 +402,57 @@ def test_screenshots_were_taken(session):
     for name in ("regions-panel.png", "regions-preview.png"):
         path = session.folder / name
         assert path.exists() and path.stat().st_size > 10_000, name
+
+
+def test_regions_do_not_change_the_size_cura_reports(records):
+    """A region sticking out of the model's top face is a modifier: the model stays 12 mm tall.
+
+    Checked where Cura shows sizes: under the object list (the scene's extent), the model's box,
+    the Scale tool's fields.
+    """
+    before, after = records["sizes_before"], records["sizes_with_regions"]
+    assert before["scene"].startswith("80.0 x 40.0 x 12.0"), before
+    assert after["scene"] == before["scene"], (before, after)
+    assert after["model"] == before["model"] and after["scale_tool"] == before["scale_tool"], (before, after)
+    assert after["region_classes"] == ["DensityRegionNode"], after
+
+
+def test_panel_combo_boxes_choose_shapes(records):
+    """The panel's combo boxes (opened and clicked) reach the tool: next shape, a region's shape; undoable."""
+    steps = records["panel_comboboxes"]
+    assert steps["shape_chosen"] == "cube" and steps["shape_before"] != "cube", steps
+    assert steps["rows_before"][0] == ["1", "sphere"], steps
+    assert steps["rows_edited"][0] == ["1", "cylinder"], steps
+    assert steps["rows_undone"] == steps["rows_before"], steps
+
+
+def test_panel_controls_are_curas_and_fit_its_width(records):
+    layout = records["panel_layout"]
+    assert layout["measured"] > 20, layout
+    assert layout["outside"] == [], f"controls past the panel's edges {layout['panel'][:2]}: {layout['outside']}"
+    assert all(layout["styled"].values()), layout["styled"]
+
+
+def test_panel_loads_without_qml_warnings(session):
+    """No QML warning names the panel (e.g. Qt 6's "Parameter "index" is not declared")."""
+    lines = [line for line in (session.cura_log + session.cura_out).splitlines() if "DensityRegionsPanel.qml" in line]
+    assert not lines, "\n".join(lines[:10])
+
+
+def test_panel_fits_its_width_with_a_larger_font(large_font_session, records):
+    assert large_font_session.ok, large_font_session.failure()
+    large, default = large_font_session.records()["panel_layout_large"], records["panel_layout"]
+    assert large["font"]["em"] >= default["font"]["em"] * 1.3, (large["font"], default["font"])
+    assert large["measured"] > 20, large
+    assert large["outside"] == [], f"controls past the panel's edges {large['panel'][:2]}: {large['outside']}"
+    assert (large_font_session.folder / "regions-panel-large-font.png").stat().st_size > 10_000
+
+
+def test_a_copied_model_keeps_its_regions_as_regions(large_font_session):
+    """Multiply / Copy-Paste deep-copy a model with its children: the regions stay density regions."""
+    copy = large_font_session.records()["model_copy"]
+    regions = [c for c in copy["children"] if c["name"].startswith("DelaunayRegion_")]
+    assert [(c["class"], c["infill_mesh"], c["density"], c["shape"]) for c in regions] == [
+        ("DensityRegionNode", True, SPHERE["density"], "sphere"),
+        ("DensityRegionNode", True, CLICK["density"], "cylinder"),
+    ], copy

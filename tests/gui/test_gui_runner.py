@@ -65,3 +65,53 @@ def test_cura_gets_a_private_loopback_when_the_machine_allows_it():
         inner = command[-1].replace("exec cura", f"{shlex.quote(sys.executable)} -c {shlex.quote(probe)}")
         result = subprocess.run(command[:-1] + [inner], capture_output=True, text=True, check=False)
     assert result.stdout.strip() == "ok", result.stderr
+
+
+def test_a_missing_cura5_chroot_is_a_failure_not_a_skip(monkeypatch, tmp_path):
+    script = tmp_path / "fails.sh"
+    script.write_text("echo cannot build >&2; exit 1\n")
+    monkeypatch.setattr(cura_runner, "CHROOT", tmp_path / "no-chroot")
+    monkeypatch.setattr(cura_runner, "CHROOT_SCRIPT", script)
+    with pytest.raises(cura_runner.CuraTierError, match="no-chroot"):
+        cura_runner.ensure_cura5()
+
+
+def test_seeded_cura5_profile_uses_its_own_folders_and_container_format(tmp_path):
+    data = seed_profile(tmp_path, version="5.0")
+    assert data == data_dir(tmp_path, "5.0") and data.parts[-2:] == ("cura", "5.0")
+    config = (tmp_path / ".config" / "cura" / "5.0" / "cura.cfg").read_text()
+    assert "last_run_version = 5.0.0" in config and "setting_version = 20" in config
+    stack = (data / "machine_instances" / "Creality+Ender-3.global.cfg").read_text()
+    assert "setting_version = 20" in stack and "7 = creality_ender3" in stack
+
+
+def test_a_cura5_job_sees_its_files_under_tmp(tmp_path):
+    """Cura 5.0 runs in the chroot: paths under the run folder move to /tmp, other input files are copied."""
+    folder = tmp_path / "run"
+    model = tmp_path / "models" / "star.stl"
+    model.parent.mkdir()
+    model.write_text("solid x\nendsolid x\n")
+    work = cura_runner._work_folder(folder)
+    # a steps file outside /tmp, which the chroot does not see (the checkout itself may lie under /tmp)
+    import tempfile
+
+    outside = tempfile.mkdtemp(dir="/var/tmp")
+    steps = f"{outside}/test_gui_runner.py"
+    with open(steps, "w") as f:
+        f.write("STEPS = 'plain text'\n")
+    job = {"actions": [{"do": "load", "file": str(model)}, {"do": "save", "path": f"{folder}/out.gcode"},
+                       {"do": "step", "file": steps, "args": {"name": "plain text", "missing": "/no/such/file"}}]}
+    mapped = cura_runner._map_job(job, folder, work, work / "inputs")
+    try:
+        assert str(work).startswith("/tmp/")
+        assert mapped["actions"][0]["file"] == str(model)  # under /tmp: the chroot sees it as it is
+        copied = mapped["actions"][2]["file"]
+        assert copied.startswith(str(work / "inputs")) and copied.endswith("/test_gui_runner.py")  # the name stays
+        assert open(copied).read() == open(steps).read()
+        assert mapped["actions"][1]["path"] == f"{work}/out.gcode"
+        assert mapped["actions"][2]["args"] == {"name": "plain text", "missing": "/no/such/file"}
+    finally:
+        import shutil
+
+        shutil.rmtree(work, ignore_errors=True)
+        shutil.rmtree(outside, ignore_errors=True)

@@ -26,6 +26,9 @@ actions, run in order on Cura's main thread once Cura has finished starting:
     ``writeFinished``.
 ``{"do": "dump_unprocessed", "path": "/abs/raw.gcode"}``
     Cura's own G-code of the last processed slice, as the plugin's job received it.
+``{"do": "dump_engine_gcode", "path": "/abs/raw.gcode"}``
+    The last slice's G-code as CuraEngine and Cura made it (copied one event-loop turn after
+    the backend's Done, before a background pass can write back), processed or not.
 ``{"do": "inspect", "key": "delaunay_infill_enabled"}``
     Record where the setting lives (category, visibility, value) in the status.
 ``{"do": "resolve", "model": "star.stl", "keys": [...], "record": "resolved"}``
@@ -48,7 +51,8 @@ actions, run in order on Cura's main thread once Cura has finished starting:
     ``ctx.wait_until(predicate, timeout_s, what)``.
 
 Top level: ``status`` (path of the status JSON, rewritten after every action),
-``quit`` (close Cura at the end), ``timeout_s`` (whole job), ``start_delay_s``.
+``quit`` (close Cura at the end), ``timeout_s`` (whole job), ``start_delay_s``,
+``font_scale`` (the application font times this, set before Cura builds its theme).
 Every action's outcome is logged as "DelaunayGuiDriver: ..." in cura.log.
 
 Waits: a generator yields either a number (sleep that many seconds) or a
@@ -94,6 +98,7 @@ class GuiDriver(Extension):
         self._finished = False
         self._loaded_files: list = []
         self._backend_states: list = []
+        self._engine_gcode = None  # the last slice's G-code as CuraEngine and Cura made it
         self._timer = QTimer()
         self._timer.setInterval(TICK_MS)
         self._timer.timeout.connect(self._tick)
@@ -108,7 +113,26 @@ class GuiDriver(Extension):
             self.status.update(ok=False, error=f"job file: {error}")
             return
         self.log(f"job {path} loaded")
+        self._scaleFont(float(self.job.get("font_scale", 1.0)))
         self.app.initializationFinished.connect(self._onInitialized)
+
+    def _scaleFont(self, scale: float) -> None:
+        """A larger (or smaller) application font, as a user's desktop font setting gives Cura.
+
+        Plugins are registered before Cura builds its theme, and the theme takes its font sizes
+        and its em-based sizes from the application font, so this runs early enough.
+        """
+        if abs(scale - 1.0) < 1e-6:
+            return
+        try:
+            from PyQt6.QtGui import QGuiApplication
+        except ImportError:
+            from PyQt5.QtGui import QGuiApplication
+        font = QGuiApplication.font()
+        size = font.pointSizeF()
+        font.setPointSizeF(size * scale)
+        QGuiApplication.setFont(font)
+        self.log(f"application font {size:g} pt -> {font.pointSizeF():g} pt")
 
     # -- helpers for actions and step files ------------------------------------------------------
     def log(self, message: str) -> None:
@@ -171,6 +195,15 @@ class GuiDriver(Extension):
 
     def _onBackendState(self, state) -> None:
         self._backend_states.append(int(state))
+        if int(state) == 3:
+            # Cura fills in its header placeholders right after emitting Done; a deferred copy is
+            # CuraEngine's G-code as Cura keeps it, before any plugin's background pass wrote back
+            self.app.callLater(self._keepEngineGCode)
+
+    def _keepEngineGCode(self) -> None:
+        gcode = self.gcode_list()
+        if gcode:
+            self._engine_gcode = "".join(gcode)
 
     def _onFileCompleted(self, file_name) -> None:
         self._loaded_files.append(file_name)
@@ -399,6 +432,13 @@ class GuiDriver(Extension):
             raise RuntimeError("the plugin has not processed a slice")
         with open(action["path"], "w", encoding="utf-8") as stream:
             stream.write("".join(job.layers_in))
+
+    def _do_dump_engine_gcode(self, action):
+        yield 0.2  # the copy is taken one event-loop turn after Done
+        if self._engine_gcode is None:
+            raise RuntimeError("no slice has finished yet")
+        with open(action["path"], "w", encoding="utf-8") as stream:
+            stream.write(self._engine_gcode)
 
     def _do_inspect(self, action):
         key = action.get("key", "delaunay_infill_enabled")

@@ -11,7 +11,11 @@ Layouts
     One variable-radius Poisson-disk sampling of the footprint grown by the
     largest radius, one Delaunay triangulation, edges clipped to the layer:
     no doubled lines along region borders, the density changes within about
-    2 r of a border, and lines end cleanly at the infill boundary.
+    2 r of a border, and lines end cleanly at the infill boundary.  Where
+    the density is uniform the samples are a triangular lattice (sampler
+    ``lattice``, the default): its Delaunay triangles are equilateral, as
+    stiff per gram as a line network gets and the same in every direction;
+    Poisson-disk samples fill the bands between zones.
 ``paper``
     The paper's pipeline: every density zone is decomposed into convex parts,
     each sampled and triangulated on its own (Bridson sampling by default).
@@ -29,7 +33,7 @@ from .decomposition import decompose_convex
 from .density import KAPPA, DensityMap, ZoneRaster, check_line_width, paper_radius
 from .geometry import as_area, boundary_segments, box, contains_xy, polygons_of, to_multipolygon, unary_union
 from .routing import chain_segments, clip_segments, odd_vertex_count, order_paths, split_segments
-from .sampling import sample_poisson_disk, sample_triangulated
+from .sampling import sample_lattice, sample_poisson_disk, sample_triangulated
 from .triangulation import (
     GrowingDelaunay,
     canonical_triangles,
@@ -434,11 +438,17 @@ class InfillPattern:
             than 0.15 points are balanced by single edges;
             ``paper``: Formula (6).
         relax : int
-            Lloyd relaxation steps (more regular triangles).
+            Lloyd relaxation steps (more regular triangles); with the
+            ``lattice`` sampler only the samples between lattices move.
         feather : float
             Blend width across region borders, mm (seamless layout).
-        sampler : {"fast", "bridson"}, optional
-            Default: ``fast`` for seamless, ``bridson`` for paper.
+        sampler : {"lattice", "fast", "bridson"}, optional
+            Default: ``lattice`` for seamless (``fast`` with a feather),
+            ``bridson`` for paper.  ``lattice``: where the
+            density is uniform the samples are a triangular lattice
+            (equilateral triangles: the stiffest line network per density,
+            the same in every direction), Poisson-disk samples elsewhere;
+            ``fast``: Poisson-disk samples everywhere.
 
         Raises
         ------
@@ -455,13 +465,17 @@ class InfillPattern:
         relax = int(relax)
         if relax < 0:
             raise ValueError(f"relax steps must be >= 0, got {relax}")
-        sampler = sampler or ("bridson" if layout == "paper" else "fast")
+        sampler = sampler or ("bridson" if layout == "paper" else "lattice")
         if layout == "seamless":
             return cls._build_seamless(area, dmap, width, int(seed), calibration, relax, sampler)
         return cls._build_paper(area, dmap, width, int(seed), calibration, relax, sampler)
 
     @classmethod
     def _build_seamless(cls, area, dmap, width, seed, calibration, relax, sampler):
+        if sampler == "lattice" and dmap.feather > 0:
+            # A feathered border varies the radius over a band the lattices leave to the Poisson-disk
+            # samples (measured there, `fast` keeps the blend closer to the map): `fast` throughout.
+            sampler = "fast"
         meter = _raster_meter(area, dmap, width) if dmap.feather <= 0 and dmap.regions else None
         if meter is None:
             zones = dmap.zones(area)
@@ -504,13 +518,17 @@ class InfillPattern:
             # incremental triangulation of the samples (the same triangles), the sampler's own
             # when it made one.
             growing = None
-            if not single and calibration == "measured" and sampler == "fast" and not relax:
-                points, qhull = sample_triangulated(sampling_area, radius_fn, seed=seed)
+            if not single and calibration == "measured" and sampler in ("fast", "lattice") and not relax:
+                points, qhull = sample_triangulated(sampling_area, radius_fn, seed=seed, lattice=sampler == "lattice")
                 growing = GrowingDelaunay(points, qhull) if qhull is not None else _growing_delaunay(points)
             else:
-                points = sample_poisson_disk(sampling_area, radius_fn, seed=seed, method=sampler)
+                fixed = 0  # relaxation leaves lattice points where they are (they are the regular part)
+                if sampler == "lattice":
+                    points, fixed = sample_lattice(sampling_area, radius_fn, seed=seed)
+                else:
+                    points = sample_poisson_disk(sampling_area, radius_fn, seed=seed, method=sampler)
                 if relax:
-                    points = relax_points(points, sampling_area, radius_fn, relax, seed=seed)
+                    points = relax_points(points, sampling_area, radius_fn, relax, seed=seed, fixed=fixed)
                 if not single and calibration == "measured":
                     growing = _growing_delaunay(points)
             triangles = delaunay_triangles(points) if growing is None else growing.add(np.zeros((0, 2)))

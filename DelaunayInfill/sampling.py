@@ -1,6 +1,6 @@
 """Poisson-disk sampling of planar regions with a constant or variable radius.
 
-Two samplers:
+Three samplers:
 
 ``fast`` (default)
     Vectorized.  Candidates come from jittered grids anchored at the origin;
@@ -18,6 +18,16 @@ Two samplers:
     and filled at the Delaunay circumcentre reached from there; with a
     variable radius the circumcentres of a Delaunay triangulation whose
     circles are wider than the radius there are inserted.
+
+``lattice``
+    ``fast`` seeded with a triangular lattice (side ``LATTICE_SPACING`` r,
+    orientation and offset hashed from the seed, anchored at the origin)
+    wherever the radius is constant: with a constant radius the lattice is
+    the whole sampling; with a variable one each radius keeps its lattice a
+    radius short of where the radius changes, and ``fast``'s candidates
+    (after the lattice points in priority) fill the bands between.  The
+    lattice is a Poisson-disk set (side > r) and maximal (circumradius
+    0.72 r < r); its Delaunay triangles are equilateral.
 
 ``bridson``
     The paper's algorithm (Bridson 2007 as described by Qiao et al. 2022):
@@ -40,7 +50,8 @@ from scipy.spatial import cKDTree
 
 from .geometry import as_area, contains_xy
 
-__all__ = ["sample_poisson_disk", "uncovered_fraction", "radius_function", "hash_uniform"]
+__all__ = ["sample_poisson_disk", "uncovered_fraction", "radius_function", "hash_uniform", "lattice_points",
+           "sample_lattice", "LATTICE_SPACING"]
 
 RadiusLike = float | Callable[[np.ndarray], np.ndarray]
 
@@ -355,22 +366,113 @@ def _uniform_level(area, spacing: float, radius: float, seed: int) -> np.ndarray
     return np.stack((x[chosen], y[chosen]), axis=1)
 
 
-def _variable_level(area, spacing: float, r_lo: float, radius_fn, seed: int):
+def _variable_level(area, spacing: float, r_lo: float, radius_fn, seed: int, first=None, info=None):
     """Greedy independent set of hashed grid candidates, thinned where the radius is larger.
 
     Thinning by (r_min / r)^2 keeps the number of candidates per disk
-    constant.  Returns the samples (n, 2) and their radii (n,).
+    constant.  `first`: points (m, 2) that take part ahead of every candidate
+    (lattice cores: they are kept wherever they conflict with no earlier one;
+    those kept come first among the samples, and `info` gets their number as
+    ``"lattice"``).  Returns the samples (n, 2) and their radii (n,).
     """
     pts, ii, jj = _grid_candidates(area, spacing, 0, seed)
     r = radius_fn(pts)
     keep = hash_uniform(ii, jj, 2, seed) < (r_lo / r) ** 2
     pts, ii, jj, r = pts[keep], ii[keep], jj[keep], r[keep]
+    priority = hash_uniform(ii, jj, 3, seed)
+    if first is not None and len(first):
+        pts = np.concatenate((first, pts))
+        r = np.concatenate((radius_fn(first), r))
+        priority = np.concatenate((np.arange(len(first)) - float(len(first)), priority))
     pi, pj = close_pairs(pts, r)
-    chosen = greedy_independent_set(len(pts), pi, pj, hash_uniform(ii, jj, 3, seed))
+    chosen = greedy_independent_set(len(pts), pi, pj, priority)
+    if info is not None:
+        info["lattice"] = 0 if first is None else int(np.count_nonzero(chosen[: len(first)]))
     return pts[chosen], r[chosen]
 
 
-def _sample_fast(area, radius_fn, seed: int, keep: list | None = None) -> np.ndarray:
+# --------------------------------------------------------------------------- lattice seeding
+# Lattice seeding: triangle side / radius.  A triangular lattice of side a prints 2 sqrt(3) w / a;
+# the `fast` sampler's maximal sets print 2.766 w / r (Delaunay edges, measured on a 200 mm square):
+# at this side the lattice prints what the Poisson-disk samples around it print at the same radius.
+LATTICE_SPACING = 2.0 * math.sqrt(3.0) / 2.766
+_LATTICE_RING = 12  # a lattice point is kept where the radius is its own at this many points ...
+_RING_RADII = 1.0  # ... on a ring of this many radii around it
+# A radius holding less area than this many squared radii keeps Poisson-disk samples: a few dozen
+# samples, whose zone is calibrated by balancing single edges (`pattern._balance_zones`).
+_LATTICE_AREA = 36.0
+
+
+def lattice_frame(seed: int) -> tuple[float, np.ndarray]:
+    """Orientation (radians, within the lattice's 60 degree period) and offset (in sides) of a seed's lattice."""
+    key = np.array([int(seed)])
+    angle = (math.pi / 3.0) * float(hash_uniform(key, key, 11, 0)[0])
+    offset = np.array([float(hash_uniform(key, key, 12, 0)[0]), float(hash_uniform(key, key, 13, 0)[0])])
+    return angle, offset
+
+
+def lattice_points(area, side: float, seed: int = 0) -> np.ndarray:
+    """The points (n, 2) of a triangular lattice of the given side inside `area`.
+
+    The lattice is a fixed function of the plane for each seed (orientation
+    and offset from `lattice_frame`, anchored at the origin): another area
+    cuts the same lattice.
+    """
+    angle, offset = lattice_frame(seed)
+    v1 = side * np.array([math.cos(angle), math.sin(angle)])
+    v2 = side * np.array([math.cos(angle + math.pi / 3), math.sin(angle + math.pi / 3)])
+    basis = np.stack((v1, v2), axis=1)  # columns
+    origin = basis @ offset
+    x0, y0, x1, y1 = area.bounds
+    corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]]) - origin
+    ij = np.linalg.solve(basis, corners.T).T  # lattice coordinates of the box's corners
+    lo, hi = np.floor(ij.min(axis=0)) - 1, np.ceil(ij.max(axis=0)) + 1
+    if (hi - lo).prod() > 2e7:
+        raise ValueError(f"lattice side {side:.4g} mm is too small for the region")
+    i, j = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
+    pts = origin + i.reshape(-1, 1) * v1 + j.reshape(-1, 1) * v2
+    box_ok = (pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)
+    pts = pts[box_ok]
+    return pts[contains_xy(area, pts[:, 0], pts[:, 1])]
+
+
+def _lattice_cores(area, radius_fn, r_lo: float, seed: int) -> np.ndarray:
+    """Lattice points in the parts of `area` where the radius is constant (variable radius).
+
+    Each radius that holds at least `_LATTICE_AREA` squared radii gets its lattice (side
+    ``LATTICE_SPACING * r``), kept where the radius is that value at the point
+    and on a ring of one radius around it: the lattices of two radii end a
+    radius short of the border between them each, so they never conflict, and
+    Poisson-disk samples fill the band between them.  A radius that varies
+    continuously (a feathered border) holds no lattice.
+    """
+    x0, y0, x1, y1 = area.bounds
+    step = r_lo
+    gx, gy = np.meshgrid(np.arange(x0 + 0.5 * step, x1, step), np.arange(y0 + 0.5 * step, y1, step))
+    probe = np.c_[gx.ravel(), gy.ravel()]
+    if len(probe) == 0:
+        return np.zeros((0, 2))
+    values, counts = np.unique(radius_fn(probe), return_counts=True)
+    values = values[counts * step * step >= _LATTICE_AREA * values * values]  # a continuous radius: none
+    ring = np.exp(2j * np.pi * np.arange(_LATTICE_RING) / _LATTICE_RING)
+    ring = np.stack((ring.real, ring.imag), axis=1)
+    out = []
+    for value in values.tolist():
+        pts = lattice_points(area, LATTICE_SPACING * value, seed)
+        if len(pts) == 0:
+            continue
+        pts = pts[radius_fn(pts) == value]
+        around = (pts[:, None, :] + _RING_RADII * value * ring[None]).reshape(-1, 2)
+        pts = pts[(radius_fn(around) == value).reshape(len(pts), -1).all(axis=1)]
+        out.append(pts)
+    return np.concatenate(out) if out else np.zeros((0, 2))
+
+
+def _sample_fast(area, radius_fn, seed: int, keep: list | None = None, lattice: bool = False,
+                 info: dict | None = None) -> np.ndarray:
+    """`fast` (or `lattice`) sampling; `info` gets ``"lattice"``: how many of the first samples are lattice points."""
+    info = {} if info is None else info
+    info["lattice"] = 0
     r_lo, r_hi = _radius_range(area, radius_fn)
     spacing = _CANDIDATE_SPACING * r_lo
     expected = area.area / (spacing * spacing)
@@ -380,9 +482,28 @@ def _sample_fast(area, radius_fn, seed: int, keep: list | None = None) -> np.nda
             f"(about {expected:.3g} candidates)"
         )
     if r_hi <= r_lo * (1 + 1e-12):
+        if lattice:
+            seeds = lattice_points(area, LATTICE_SPACING * r_lo, seed)
+            info["lattice"] = len(seeds)  # gap filling appends after them
+            return _fill_gaps_constant(area, seeds, r_lo)
         return _fill_gaps_constant(area, _uniform_level(area, spacing, r_lo, seed), r_lo)
-    samples, samples_r = _variable_level(area, spacing, r_lo, radius_fn, seed)
+    first = _lattice_cores(area, radius_fn, r_lo, seed) if lattice else None
+    samples, samples_r = _variable_level(area, spacing, r_lo, radius_fn, seed, first, info)
     return _fill_gaps_variable(area, samples, samples_r, radius_fn, keep=keep)
+
+
+def sample_lattice(region, radius: RadiusLike, *, seed: int = 0) -> tuple[np.ndarray, int]:
+    """`sample_poisson_disk` with ``method="lattice"``, and how many of the first samples are lattice points.
+
+    Returns
+    -------
+    (ndarray, shape (n, 2); int)
+        The samples; the first k of them lie on the lattices (the rest are
+        Poisson-disk samples between them).
+    """
+    info = {}
+    points = _sample_fast(as_area(region), radius_function(radius), int(seed), lattice=True, info=info)
+    return points, info["lattice"]
 
 
 # --------------------------------------------------------------------------- gap filling
@@ -782,8 +903,11 @@ def sample_poisson_disk(region, radius: RadiusLike, *, seed: int = 0, method: st
         an (m, 2) array and returning (m,) radii for a variable radius.
     seed : int
         Same region, radius and seed give identical samples.
-    method : {"fast", "bridson"}
-        ``fast``: vectorized; ``bridson``: the paper's algorithm.
+    method : {"fast", "lattice", "bridson"}
+        ``fast``: vectorized; ``lattice``: ``fast`` seeded with a triangular
+        lattice of side ``LATTICE_SPACING * r`` where the radius is constant
+        (a regular Poisson-disk set: every triangle equilateral there);
+        ``bridson``: the paper's algorithm.
 
     Returns
     -------
@@ -799,15 +923,15 @@ def sample_poisson_disk(region, radius: RadiusLike, *, seed: int = 0, method: st
     """
     area = as_area(region)
     radius_fn = radius_function(radius)
-    if method == "fast":
-        return _sample_fast(area, radius_fn, int(seed))
+    if method in ("fast", "lattice"):
+        return _sample_fast(area, radius_fn, int(seed), lattice=method == "lattice")
     if method == "bridson":
         return _sample_bridson(area, radius_fn, int(seed))
-    raise ValueError(f"method must be 'fast' or 'bridson', got {method!r}")
+    raise ValueError(f"method must be 'fast', 'lattice' or 'bridson', got {method!r}")
 
 
-def sample_triangulated(region, radius: RadiusLike, *, seed: int = 0):
-    """`sample_poisson_disk` (``fast``) and, where its gap filling triangulated them, the triangulation.
+def sample_triangulated(region, radius: RadiusLike, *, seed: int = 0, lattice: bool = False):
+    """`sample_poisson_disk` (``fast``, or ``lattice``) and, where its gap filling triangulated them, the triangulation.
 
     Returns
     -------
@@ -817,7 +941,7 @@ def sample_triangulated(region, radius: RadiusLike, *, seed: int = 0):
         None (a constant radius, or too few samples).
     """
     keep = []
-    points = _sample_fast(as_area(region), radius_function(radius), int(seed), keep)
+    points = _sample_fast(as_area(region), radius_function(radius), int(seed), keep, lattice)
     return points, (keep[0] if keep else None)
 
 

@@ -218,7 +218,7 @@ def edge_length_stats(segments: np.ndarray) -> dict:
     return {"mean_mm": mean, "short_share": float(np.mean(length < 0.5 * mean))}
 
 
-def relax_points(points: np.ndarray, area, radius_fn, steps: int, *, seed: int = 0) -> np.ndarray:
+def relax_points(points: np.ndarray, area, radius_fn, steps: int, *, seed: int = 0, fixed: int = 0) -> np.ndarray:
     """Lloyd relaxation towards a centroidal Voronoi tessellation.
 
     Monte-Carlo Lloyd: each step assigns many random points of `area` to
@@ -234,6 +234,9 @@ def relax_points(points: np.ndarray, area, radius_fn, steps: int, *, seed: int =
     radius_fn : callable (m, 2) -> (m,)
     steps : int
     seed : int
+    fixed : int
+        The first `fixed` points stay where they are (a lattice: only the
+        samples between lattices move).
 
     Returns
     -------
@@ -255,5 +258,6 @@ def relax_points(points: np.ndarray, area, radius_fn, steps: int, *, seed: int =
         cx = np.bincount(owner, weight * probe[:, 0], minlength=len(pts))
         cy = np.bincount(owner, weight * probe[:, 1], minlength=len(pts))
         moved = mass > 0
+        moved[:fixed] = False
         pts[moved] = np.c_[cx[moved] / mass[moved], cy[moved] / mass[moved]]
     return pts

@@ -11,6 +11,7 @@ from shapes import annulus, star
 from DelaunayInfill import sample_poisson_disk
 from DelaunayInfill.geometry import contains_xy
 from DelaunayInfill.sampling import (
+    LATTICE_SPACING,
     _fill_gaps_constant,
     _grid_cells,
     _grid_independent_set,
@@ -18,10 +19,12 @@ from DelaunayInfill.sampling import (
     close_pairs,
     greedy_independent_set,
     hash_uniform,
+    lattice_points,
+    sample_lattice,
     uncovered_fraction,
 )
 
-METHODS = ["fast", "bridson"]
+METHODS = ["fast", "lattice", "bridson"]
 
 
 def min_pair_distance(points):
@@ -307,3 +310,65 @@ def test_sampling_with_its_triangulation_hands_over_the_delaunay_of_the_samples(
     np.testing.assert_array_equal(grown, canonical_triangles(delaunay_triangles(np.r_[points, extra])))
     # A constant radius fills its gaps without a triangulation: none to hand over.
     assert sample_triangulated(region, 2.0, seed=seed)[1] is None
+
+
+def test_lattice_sampling_is_an_equilateral_lattice_fixed_in_the_plane():
+    r = 2.0
+    pts = sample_poisson_disk(box(0, 0, 60, 40), r, seed=5, method="lattice")
+    side = LATTICE_SPACING * r
+    d, _ = cKDTree(pts).query(pts, k=7)
+    inner = (np.abs(pts - [30, 20]) < [25, 15]).all(axis=1)
+    np.testing.assert_allclose(d[inner, 1:], side, rtol=1e-9)  # six neighbours at one side
+    assert side > r and side / np.sqrt(3) < r  # a Poisson-disk set, and maximal
+    # the same lattice in another region (a fixed function of the plane), another per seed
+    other = sample_poisson_disk(box(20, 10, 90, 70), r, seed=5, method="lattice")
+    core = pts[(np.abs(pts - [40, 25]) < 8).all(axis=1)]
+    assert len(core) > 10
+    assert cKDTree(other).query(core)[0].max() < 1e-9
+    assert not np.allclose(lattice_points(box(0, 0, 30, 30), side, 6)[:3], lattice_points(box(0, 0, 30, 30), side, 5)[:3])
+
+
+def test_lattice_sampling_with_a_variable_radius_keeps_lattices_in_the_uniform_parts():
+    region = box(0, 0, 80, 40)
+
+    def radius(xy):
+        return np.where(xy[:, 0] < 40, 1.5, 4.0)
+
+    pts = sample_poisson_disk(region, radius, seed=1, method="lattice")
+    i, _ = close_pairs(pts, radius(pts))
+    assert i.size == 0
+    assert uncovered_fraction(region, pts, radius) <= 0.01
+    d, _ = cKDTree(pts).query(pts, k=7)
+    for x0, x1, r in ((3, 35, 1.5), (50, 77, 4.0)):
+        core = (pts[:, 0] > x0) & (pts[:, 0] < x1) & (pts[:, 1] > 5) & (pts[:, 1] < 35)
+        regular = np.all(np.abs(d[core, 1:] / (LATTICE_SPACING * r) - 1) < 1e-9, axis=1)
+        assert regular.mean() > 0.8
+
+
+def test_sample_lattice_lists_its_lattice_points_first():
+    region = box(0, 0, 80, 40)
+    pts, k = sample_lattice(region, 2.0, seed=3)
+    np.testing.assert_array_equal(pts[:k], lattice_points(region, LATTICE_SPACING * 2.0, 3))
+
+    def radius(xy):
+        return np.where(xy[:, 0] < 40, 1.5, 4.0)
+
+    pts, k = sample_lattice(region, radius, seed=3)
+    np.testing.assert_array_equal(pts, sample_poisson_disk(region, radius, seed=3, method="lattice"))
+    assert 0 < k < len(pts)
+    on_lattice = np.zeros(len(pts), dtype=bool)
+    for r in (1.5, 4.0):
+        d, _ = cKDTree(lattice_points(region, LATTICE_SPACING * r, 3)).query(pts)
+        on_lattice |= d < 1e-9
+    assert on_lattice[:k].all()
+
+
+def test_lattice_sampling_of_a_continuous_radius_is_the_fast_sampling():
+    region = box(0, 0, 60, 30)
+
+    def radius(xy):
+        return 1.5 + 0.05 * xy[:, 0]  # no two probes share a radius: no lattice anywhere
+
+    pts, k = sample_lattice(region, radius, seed=2)
+    assert k == 0
+    np.testing.assert_array_equal(pts, sample_poisson_disk(region, radius, seed=2, method="fast"))

@@ -21,6 +21,7 @@ from .geometry import as_area, polygons_of
 __all__ = ["cross_turn", "reflex_vertices", "is_convex", "decompose_convex"]
 
 _TOL = 1e-9
+_SLIVER_MM2 = 0.01  # a piece this small that cannot be split further is left out
 
 
 def cross_turn(ring: np.ndarray) -> np.ndarray:
@@ -116,7 +117,9 @@ def decompose_convex(region) -> list[Polygon]:
     Returns
     -------
     list of Polygon
-        Convex pieces covering the region exactly (no overlaps).
+        Convex pieces covering the region exactly (no overlaps), but for slivers
+        of at most 0.01 mm² (units mm) that no diagonal, edge extension or
+        triangulation splits.
     """
     stack = [orient(p, 1.0) for p in polygons_of(as_area(region))]
     out: list[Polygon] = []
@@ -130,7 +133,47 @@ def decompose_convex(region) -> list[Polygon]:
             continue
         line = _best_diagonal(poly)
         pieces = _split_pieces(poly, line) if line is not None else []
-        if not pieces:
+        if len(pieces) < 2:
+            # No diagonal between vertices lies inside (one would touch the border): cut along an
+            # edge of a reflex vertex carried on into the polygon, else into ear-clipped triangles.
+            pieces = _extension_pieces(poly) or _triangles(poly)
+        if len(pieces) < 2:
+            if poly.area <= _SLIVER_MM2:
+                continue  # a sliver (where two borders almost meet) that nothing fits in: left out
             raise ValueError("convex decomposition failed: no valid diagonal at a concave vertex")
         stack.extend(orient(p, 1.0) for p in pieces)
     return out
+
+
+def _extension_pieces(polygon: Polygon) -> list[Polygon]:
+    """The polygon cut along the extension of an edge beyond one of its reflex vertices ([] if none cuts it).
+
+    The cut ends where it meets the border, so it resolves that vertex's reflex angle.
+    """
+    ring = _open_ring(polygon)
+    m = len(ring)
+    turn = cross_turn(ring)
+    scale = max(1.0, float(np.ptp(ring, axis=0).max()))
+    for v in np.flatnonzero(turn < -_TOL * scale * scale):
+        for before in (ring[(v - 1) % m], ring[(v + 1) % m]):
+            direction = ring[v] - before
+            norm = float(np.hypot(*direction))
+            if norm <= 0:
+                continue
+            ray = LineString([ring[v], ring[v] + direction / norm * 4.0 * scale])
+            pieces = [p for p in _split_pieces(polygon, ray) if p.area > _TOL * scale * scale]
+            if len(pieces) >= 2:
+                return pieces
+    return []
+
+
+def _triangles(polygon: Polygon) -> list[Polygon]:
+    """Ear-clipped triangles of a simple polygon (each convex); [] when it cannot be triangulated."""
+    from .models import triangulate_polygon
+
+    ring = _open_ring(polygon)
+    try:
+        triangles = triangulate_polygon(ring)
+    except ValueError:
+        return []
+    return [Polygon(ring[t]) for t in triangles if Polygon(ring[t]).area > 0]

@@ -50,6 +50,7 @@ __all__ = ["InfillPattern", "InfillResult", "generate_infill", "segment_length"]
 LAYOUTS = ("seamless", "paper")
 CALIBRATIONS = ("measured", "paper")
 _TOLERANCE = 0.0015  # calibration stops within 0.15 percentage points
+_PRINTED_TOLERANCE = 0.005  # paper layout calibrated on its clipped lines (`InfillPattern.build`'s inset)
 _MAX_ITERATIONS = 8
 _LOOP_TOLERANCE = 0.003  # several zones: the loop stops within 0.3 points (balancing does the rest)
 _SLIVER = 1.5  # hull triangles with a circumradius above 1.5 r are not part of the pattern
@@ -413,6 +414,7 @@ class InfillPattern:
         relax: int = 0,
         feather: float = 0.0,
         sampler: str | None = None,
+        inset: float = 0.0,
     ) -> InfillPattern:
         """Sample, triangulate and calibrate a pattern for `footprint`.
 
@@ -449,6 +451,12 @@ class InfillPattern:
             (equilateral triangles: the stiffest line network per density,
             the same in every direction), Poisson-disk samples elsewhere;
             ``fast``: Poisson-disk samples everywhere.
+        inset : float
+            Paper layout: how far inside the footprint the infill area lies, mm
+            (the G-code pass builds on the area grown by a line width).  The
+            lines will be printed half a line width further in, so each convex
+            part is calibrated on its lines there, against its part of the
+            infill area.
 
         Raises
         ------
@@ -468,7 +476,7 @@ class InfillPattern:
         sampler = sampler or ("bridson" if layout == "paper" else "lattice")
         if layout == "seamless":
             return cls._build_seamless(area, dmap, width, int(seed), calibration, relax, sampler)
-        return cls._build_paper(area, dmap, width, int(seed), calibration, relax, sampler)
+        return cls._build_paper(area, dmap, width, int(seed), calibration, relax, sampler, max(0.0, float(inset)))
 
     @classmethod
     def _build_seamless(cls, area, dmap, width, seed, calibration, relax, sampler):
@@ -588,30 +596,45 @@ class InfillPattern:
         return cls(segments, points, triangles, area, dmap, width, "seamless", calibration, list(measured), iteration)
 
     @classmethod
-    def _build_paper(cls, area, dmap, width, seed, calibration, relax, sampler):
+    def _build_paper(cls, area, dmap, width, seed, calibration, relax, sampler, inset=0.0):
         parts = []
         for zone_index, zone in enumerate(dmap.zones(area)):
             for polygon in polygons_of(zone):
+                if polygon.area < 1e-3 * width * width:
+                    continue  # a sliver between zones: no line fits in it
                 parts.extend((convex, zone_index) for convex in decompose_convex(polygon))
         targets = dmap.densities
+        if inset > 0:
+            infill = area.buffer(-inset)
+            printed_area = area.buffer(-(inset + width / 2))
         all_points, all_triangles, all_segments = [], [], []
         offset = 0
         for part_index, (part, zone_index) in enumerate(parts):
             target = targets[zone_index]
             radius = paper_radius(target, width) if calibration == "paper" else KAPPA * width / target
+            # what will be printed of the part: its lines half a line width inside the infill area
+            # (the footprint's own border shrunk, not the borders between its parts)
+            kept = to_multipolygon(part.intersection(printed_area)) if inset > 0 else None
+            infill_area = part.intersection(infill).area if inset > 0 else part.area
+            # (clipped lines come and go with the samples: half a point is as close as a resampling gets)
+            tolerance = _TOLERANCE if kept is None else max(_TOLERANCE, _PRINTED_TOLERANCE)
             best = None
-            for _ in range(_MAX_ITERATIONS if calibration == "measured" else 1):
+            # a part a few samples across is as dense as its samples fall: two tries, the closer kept
+            tries = _MAX_ITERATIONS if part.area > 30.0 * radius * radius else 2
+            for _ in range(tries if calibration == "measured" else 1):
                 points = sample_poisson_disk(part, radius, seed=seed + part_index, method=sampler)
                 if relax:
                     points = relax_points(points, part, lambda xy, r=radius: np.full(len(xy), r), relax, seed=seed)
                 triangles = delaunay_triangles(points)
                 segments = points[unique_edges(triangles)] if len(triangles) else np.zeros((0, 2, 2))
-                got = segment_length(segments) * width / part.area
+                printed = segments if kept is None else clip_segments(segments, kept) if not kept.is_empty else segments[:0]
+                got = segment_length(printed) * width / infill_area if infill_area > 0 else 0.0
                 if best is None or abs(got - target) < best[0]:
                     best = (abs(got - target), points, triangles, segments)
-                if calibration == "paper" or abs(got - target) <= _TOLERANCE or got <= 0:
+                if calibration == "paper" or abs(got - target) <= tolerance or (got <= 0 and kept is None):
                     break
-                radius *= float(np.clip(got / target, 0.5, 2.0))
+                # (nothing printed of a small part: halve the radius, its lines come inside)
+                radius *= float(np.clip(got / target, 0.5, 2.0)) if got > 0 else 0.5
             _, points, triangles, segments = best
             all_points.append(points)
             all_triangles.append(triangles + offset)

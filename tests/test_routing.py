@@ -148,3 +148,28 @@ def test_greedy_order_takes_the_nearest_free_end_first(seed, count, closed):
         here = tuple(expected[-1][-1])
     assert len(got) == count
     assert all(np.array_equal(a, b) for a, b in zip(got, expected, strict=True))
+
+
+def test_blocks_of_islands_of_their_own_take_their_islands_paths():
+    """CuraEngine 5.0 writes a FILL block per island: each block then gets its own island's paths,
+    routed from where it starts, and nothing crosses between islands."""
+    from shapely.geometry import MultiPolygon, box
+
+    from DelaunayInfill.gcode.process import _island_runs
+
+    part = MultiPolygon([box(0, 0, 10, 10), box(20, 0, 30, 10)])
+    left = [np.array([[1.0, 1.0 + k], [9.0, 1.0 + k]]) for k in range(4)]
+    right = [np.array([[21.0, 1.0 + k], [29.0, 1.0 + k]]) for k in range(3)]
+    paths = [left[0], right[0], left[1], right[1], left[2], right[2], left[3]]  # interleaved: a shared route
+    ends = np.array([[0.0, 0.0, 9.0, 4.0], [20.0, 0.0, 29.0, 3.0]])
+    anchors = np.array([[5.0, 5.0], [25.0, 5.0]])
+    runs = _island_runs(paths, ends, anchors, part)
+    assert [len(r) for r in runs] == [4, 3]
+    assert all(p[:, 0].max() < 10 for p in runs[0]) and all(p[:, 0].min() > 20 for p in runs[1])
+    # blocks in print order: the second block printing the left island gets the left paths
+    runs = _island_runs(paths, ends[::-1], anchors[::-1], part)
+    assert [len(r) for r in runs] == [3, 4]
+    # two blocks in one island, or a path in no block's island: the shared route decides (None)
+    assert _island_runs(paths, ends, np.array([[5.0, 5.0], [6.0, 5.0]]), part) is None
+    stray = [*paths, np.array([[40.0, 1.0], [45.0, 1.0]])]
+    assert _island_runs(stray, ends, anchors, MultiPolygon([*part.geoms, box(39, 0, 50, 10)])) is None

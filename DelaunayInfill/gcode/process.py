@@ -141,7 +141,7 @@ class Survey:
 
 
 # ----------------------------------------------------------------------------- patterns
-def _build_pattern(footprint, density, line_width, regions, settings: ProcessSettings):
+def _build_pattern(footprint, density, line_width, regions, settings: ProcessSettings, inset: float = 0.0):
     from ..pattern import InfillPattern
 
     return InfillPattern.build(
@@ -154,6 +154,7 @@ def _build_pattern(footprint, density, line_width, regions, settings: ProcessSet
         calibration=settings.calibration,
         relax=settings.relax,
         feather=settings.feather,
+        inset=inset,
     )
 
 
@@ -222,6 +223,15 @@ class PatternCache:
             if grow_from is None:
                 grow_from = footprint
         footprint = area if grow_from is None else unary_union([grow_from, area])
+        if self.settings.layout == "paper":
+            # The paper's pipeline: the infill area (grown by a line width) decomposed into convex parts,
+            # nothing planned beyond it; each part is calibrated on what is printed of it (`inset`).
+            footprint = to_multipolygon(footprint.buffer(line_width, 4))
+            pattern = _build_pattern(footprint, density, line_width, regions, self.settings, inset=line_width)
+            self.builds += 1
+            bucket.insert(0, (footprint, regions, pattern))
+            del bucket[self.per_key :]
+            return pattern, footprint, regions
         extent = self.extents.get(mesh)
         if extent is not None and (grow_from is not None or _reaches_past(extent, area.bounds, _GROWTH_MM)):
             # Where the mesh's infill can ever be, once its section is seen to grow upwards (a sphere's
@@ -927,7 +937,8 @@ class _Run:
             # keeps its order, Cura's blocks keep theirs.  A travel that leaves the part is
             # retracted (when Cura retracts): it costs about as much as this much more travel.
             penalty = _RETRACT_TRAVEL_MM if out.retraction.seen else 0.0
-            self._share_paths(host.paths, host.fill_blocks, parse.blocks, host.travel_part, penalty, host.assigned)
+            self._share_paths(host.paths, host.fill_blocks, parse.blocks, host.travel_part, penalty, host.assigned,
+                              _block_anchors(parse, host.fill_blocks))
 
     def _emit_host(self, parse: LayerParse, host: _HostInfill, out: _LayerOut) -> None:
         """Each of the host's FILL blocks rewritten with its paths, or kept as Cura's."""
@@ -1085,7 +1096,8 @@ class _Run:
         self.witnessed_memo[key] = (g.area, out)
         return out
 
-    def _share_paths(self, paths, fill_blocks: list[int], blocks, part, penalty: float, assigned: dict) -> None:
+    def _share_paths(self, paths, fill_blocks: list[int], blocks, part, penalty: float, assigned: dict,
+                     anchors: np.ndarray | None = None) -> None:
         """Cut the layer's route into one run of consecutive paths per Cura FILL block (`plan_runs`).
 
         Remembered per clip result (a prism's layers share their paths and blocks).
@@ -1094,8 +1106,10 @@ class _Run:
         key = (id(paths), id(part), penalty, tuple(fill_blocks), tuple(round(v, 2) for e in ends for v in e))
         hit = self.shares.get(key)
         if hit is None or hit[0] is not paths or hit[1] is not part:
-            cost = TravelCost(part, penalty)
-            hit = (paths, part, plan_runs(list(paths), np.array(ends, dtype=float), cost))
+            runs = _island_runs(paths, np.array(ends, dtype=float), anchors, part) if anchors is not None else None
+            if runs is None:
+                runs = plan_runs(list(paths), np.array(ends, dtype=float), TravelCost(part, penalty))
+            hit = (paths, part, runs)
             if len(self.shares) >= 16:
                 self.shares.pop(next(iter(self.shares)))
             self.shares[key] = hit
@@ -1324,6 +1338,54 @@ class _Run:
             r.regions.append(RegionReport(name, t.target, measured, t.area, t.layers))
         return patch_header(header, self.time_delta, self.e_before, self.e_delta, self.s, volumetric=self.info.volumetric,
                             layers=(r.layers_processed, r.layers_kept, len(r.failed_layers)))
+
+
+def _block_anchors(parse: LayerParse, fill_blocks: list[int]) -> np.ndarray | None:
+    """Per FILL block, the middle of its first FILL line, shape (b, 2) mm (None: a block prints none)."""
+    m = parse.moves
+    fill = parse.extruding() & parse.kind_mask(FILL)
+    rows = np.flatnonzero(fill & np.isin(m["block"], fill_blocks))
+    blocks, first = np.unique(m["block"][rows], return_index=True)  # each block's first FILL line
+    if len(blocks) < len(fill_blocks):
+        return None
+    at = rows[first[np.searchsorted(blocks, fill_blocks)]]
+    return np.c_[(m["x0"][at] + m["x1"][at]) / 2, (m["y0"][at] + m["y1"][at]) / 2]
+
+
+def _island_runs(paths: list[np.ndarray], ends: np.ndarray, anchors: np.ndarray, part) -> list[list[np.ndarray]] | None:
+    """One run per FILL block when each block fills an island of its own (None: they do not).
+
+    CuraEngine 5.0 writes one FILL block per island (a pillar, a letter): a block's run is then the
+    paths of its island, routed from where the block starts, and no route needs sharing
+    (`routing.plan_runs` costs every cut of a shared route, which grows with blocks x paths).
+    Each block's Cura lines (`anchors`) must lie in a piece of `part` of its own, and every path must
+    start in one of those pieces.
+
+    Parameters
+    ----------
+    paths : list of ndarray, each (m, 2)
+    ends : ndarray, shape (b, 4)
+        Per block in print order: start x, y and end x, y, mm.
+    anchors : ndarray, shape (b, 2)
+        A point of each block's own FILL lines (`_block_anchors`), mm.
+    part : (Multi)Polygon or None
+        The islands (the mesh's part), mm.
+    """
+    if part is None or len(ends) < 2 or not paths or not np.isfinite(ends).all():
+        return None
+    pieces = polygons_of(part)
+    if len(pieces) < len(ends):
+        return None
+    heads = np.array([p[0] for p in paths], dtype=float)
+    block_piece = np.full(len(ends), -1)
+    path_piece = np.full(len(paths), -1)
+    for k, piece in enumerate(pieces):
+        block_piece[contains_xy(piece, anchors[:, 0], anchors[:, 1])] = k
+        path_piece[contains_xy(piece, heads[:, 0], heads[:, 1])] = k
+    if (block_piece < 0).any() or len(set(block_piece.tolist())) < len(ends) or not np.isin(path_piece, block_piece).all():
+        return None
+    return [order_paths([paths[i] for i in np.flatnonzero(path_piece == k)], (b[0], b[1]))[0] if (path_piece == k).any()
+            else [] for k, b in zip(block_piece, ends)]
 
 
 def _block_rate(parse: LayerParse, moves: np.ndarray, mesh: str, fill: np.ndarray, rates: dict) -> float | None:

@@ -2,12 +2,13 @@
 
 A box, a bushing and a dome (manifold3d) are sliced at 20 % with Cura's defaults, together with a
 dense-lines reference slice that tiles Cura's infill area (``everyday.reference_settings``).  Faces
-are painted (the box's top, the bushing's bore, the dome's curved face) and the G-code is processed
+are painted (the box's top, one of its sides, the bushing's bore, the dome's curved face) and the G-code is processed
 with ``delaunay-infill process --paint MODEL.stl:FACES.json:60:DEPTH --modifier-offset 110,110``.
 
 Measured independently of the package: the G-code is read by ``everyday_check.extract_layers``, the
 infill area of a layer is the reference's lines grown by half a line width, and the painted region
-is said analytically for each model (the top DEPTH mm of the box; the ring of radius 7 to 7 + DEPTH
+is said analytically for each model (the top DEPTH mm of the box; the slab DEPTH mm deep behind the
+painted side; the ring of radius 7 to 7 + DEPTH
 round the bore; the dome's shell of radius 20 - DEPTH to 20, at each layer's mid-height).  Density
 is new infill line length x line width / area, inside each piece shrunk by a line width (so that
 lines on a border count once), over all layers, as ``gcode_check.measure_region_densities`` does.
@@ -46,6 +47,10 @@ def _box_top(tri):
     return np.flatnonzero((_normals(tri)[:, 2] > 0.99) & (tri[:, :, 2].min(axis=1) > 19.99))
 
 
+def _box_side(tri):
+    return np.flatnonzero((_normals(tri)[:, 0] > 0.99) & (tri[:, :, 0].min(axis=1) > 19.99))
+
+
 def _bore(tri):
     radius = np.hypot(*tri[:, :, :2].mean(axis=1).T)
     return np.flatnonzero((np.abs(_normals(tri)[:, 2]) < 0.01) & (radius < 7.5))
@@ -57,6 +62,10 @@ def _dome_face(tri):
 
 def _box_truth(depth):
     return lambda z: box(-1e3, -1e3, 1e3, 1e3) if z >= 20.0 - depth else Polygon()
+
+
+def _side_truth(depth):
+    return lambda z: box(20.0 - depth, -1e3, 1e3, 1e3)
 
 
 def _bore_truth(depth):
@@ -74,6 +83,7 @@ def _dome_truth(depth):
 CASES = {
     # name: (solid builder, painted faces, depth mm, the painted region at a height, model coordinates)
     "box": (lambda: block(40, 40, 20), _box_top, 6.0, _box_truth),
+    "box_side": (lambda: block(40, 40, 20), _box_side, 6.0, _side_truth),
     "bushing": (bushing, _bore, 6.0, _bore_truth),
     "dome": (dome, _dome_face, 4.0, _dome_truth),
 }

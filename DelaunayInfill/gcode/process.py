@@ -223,16 +223,8 @@ class PatternCache:
             if grow_from is None:
                 grow_from = footprint
         footprint = area if grow_from is None else unary_union([grow_from, area])
-        if self.settings.layout == "paper":
-            # The paper's pipeline: the infill area (grown by a line width) decomposed into convex parts,
-            # nothing planned beyond it; each part is calibrated on what is printed of it (`inset`).
-            footprint = to_multipolygon(footprint.buffer(line_width, 4))
-            pattern = _build_pattern(footprint, density, line_width, regions, self.settings, inset=line_width)
-            self.builds += 1
-            bucket.insert(0, (footprint, regions, pattern))
-            del bucket[self.per_key :]
-            return pattern, footprint, regions
-        extent = self.extents.get(mesh)
+        # (the paper's pipeline plans nothing beyond the infill area: it decomposes that area itself)
+        extent = self.extents.get(mesh) if self.settings.layout != "paper" else None
         if extent is not None and (grow_from is not None or _reaches_past(extent, area.bounds, _GROWTH_MM)):
             # Where the mesh's infill can ever be, once its section is seen to grow upwards (a sphere's
             # lower half, a cone on its tip, a flaring vase): the pattern is already there for the
@@ -240,7 +232,8 @@ class PatternCache:
             # the pattern of its own area.)
             footprint = unary_union([footprint, shapely_box(*extent)])
         footprint = to_multipolygon(footprint.buffer(line_width, 4))
-        pattern = _build_pattern(footprint, density, line_width, regions, self.settings)
+        # the infill area lies a line width inside the footprint (the paper layout calibrates on it)
+        pattern = _build_pattern(footprint, density, line_width, regions, self.settings, inset=line_width)
         self.builds += 1
         bucket.insert(0, (footprint, regions, pattern))
         del bucket[self.per_key :]

@@ -125,6 +125,16 @@ def find_curaengine(engine: str | os.PathLike | None = None) -> str:
     return path
 
 
+def setup_problem() -> str | None:
+    """Why CuraEngine cannot slice here (no executable, no Cura resources), or None when it can."""
+    try:
+        find_curaengine()
+        find_resources()
+    except CuraEngineError as exc:
+        return str(exc)
+    return None
+
+
 # --------------------------------------------------------------------------- definitions
 
 

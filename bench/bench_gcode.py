@@ -300,11 +300,9 @@ def main(argv=None) -> int:
     parser.add_argument("--height", type=float, default=None,
                         help="make every model this tall, mm (default: the test models, 10 mm; the cube 20 mm)")
     args = parser.parse_args(argv)
-    try:
-        curaengine.find_curaengine()
-        curaengine.find_resources()
-    except curaengine.CuraEngineError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    problem = curaengine.setup_problem()
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
         return 2
     names = [n.strip() for n in args.models.split(",") if n.strip()]
     with tempfile.TemporaryDirectory() as tmp:

@@ -222,11 +222,9 @@ def main(argv=None) -> int:
     parser.add_argument("--plot", default=None, help="save the polar plot (20 %, or the first density) here")
     parser.add_argument("--out", default=None, help="keep the G-code files in this folder")
     args = parser.parse_args(argv)
-    try:
-        curaengine.find_curaengine()
-        curaengine.find_resources()
-    except curaengine.CuraEngineError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    problem = curaengine.setup_problem()
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
         return 2
     densities = [float(v) for v in args.densities.split(",")]
     with tempfile.TemporaryDirectory() as tmp:

@@ -292,6 +292,10 @@ def _map_job(job, folder: Path, work: Path, inputs: Path):
             target = inputs / str(len(copied)) / os.path.basename(value)  # the name stays: Cura names models by it
             target.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(value, target)
+            if value.endswith(".py"):  # a steps file loads its helper modules from beside itself
+                for sibling in Path(value).parent.glob("*.py"):
+                    if not (target.parent / sibling.name).exists():
+                        shutil.copy2(sibling, target.parent / sibling.name)
             copied[value] = str(target)
         return copied[value]
 

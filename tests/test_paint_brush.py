@@ -88,3 +88,21 @@ def test_mesh_order_and_transform():
     m[:3, 3] = [1, 2, 3]
     out = paint.transform_triangles(m, v.reshape(2, 3, 3))
     assert np.allclose(out[0, 0], [1 - 0, 2 + 2, 3 + 2])
+
+
+def test_a_mesh_wound_inwards_is_turned_outwards_so_the_brush_still_paints_the_faces_it_sees():
+    """After Multiply Selected, mirroring one copy re-winds the mesh both copies share (Cura):
+    the other copy's triangles then face inwards; the stroke turns them out again (same rows)."""
+    box = shape_triangles("cube", 10.0)
+    assert paint.signed_volume(box) == pytest.approx(1000.0)
+    inward = box[:, [1, 0, 2]]
+    assert paint.signed_volume(inward) == pytest.approx(-1000.0)
+    turned = paint.outward(inward)
+    assert paint.signed_volume(turned) == pytest.approx(1000.0)
+    assert np.allclose(np.sort(turned, axis=1), np.sort(box, axis=1))  # the same faces in the same rows
+    up = np.flatnonzero(np.isclose(paint.unit_normals(box)[:, 2], 1.0))
+    down = [0.0, 0.0, -1.0]  # looking down at the top
+    top_centre = [0.0, 0.0, 5.0]
+    assert list(paint.brush_faces(turned, top_centre, 3.0, view_direction=down)) == list(up)
+    assert list(paint.brush_faces(inward, top_centre, 3.0, view_direction=down)) != list(up)  # what it fixes
+    assert paint.outward(box) is not None and np.array_equal(paint.outward(box), box)

@@ -106,3 +106,31 @@ def test_a_stroke_undoes_and_redoes_to_the_exact_states():
 def test_colours_differ_per_set():
     assert len({paint.set_color_hex(n) for n in range(1, len(paint.PALETTE) + 1)}) == len(paint.PALETTE)
     assert paint.set_color(1) == paint.set_color(1 + len(paint.PALETTE))
+
+
+def test_the_set_of_a_clicked_face():
+    """A click on a painted face selects the set that face is painted in (0: not painted)."""
+    data = paint.PaintData(20)
+    data.add_set(60, 6)
+    data.add_set(10, 2)
+    data.paint(1, [0, 5, 6])
+    data.paint(2, [6, 19])  # face 6 moves to set 2
+    assert [data.set_of_face(f) for f in (0, 5, 6, 19, 1, 7, 18)] == [1, 1, 2, 2, 0, 0, 0]
+    assert paint.PaintData(3).set_of_face(1) == 0
+
+
+@pytest.mark.parametrize("chosen, expected", [
+    ("file:///tmp/out/box_paint1.stl", "/tmp/out/box_paint1.stl"),
+    ("file:///tmp/with%20space/a.stl", "/tmp/with space/a.stl"),
+    ("file://localhost/tmp/b.stl", "/tmp/b.stl"),
+    ("/tmp/c.stl", "/tmp/c.stl"),
+])
+def test_a_file_dialogs_choice_becomes_a_local_path(chosen, expected):
+    assert paint.local_path(chosen) == expected
+    stl, faces = paint.export_paths(paint.local_path(chosen))
+    assert stl == expected and faces == expected[: -len(".stl")] + ".faces.json"
+
+
+def test_no_choice_is_refused():
+    with pytest.raises(ValueError, match="no file chosen"):
+        paint.local_path("  ")

@@ -94,3 +94,61 @@ def test_the_export_is_what_the_command_line_reads(tmp_path):
     assert from_files.at(17.0).symmetric_difference(direct.at(17.0)).area < 1e-3
     with pytest.raises(ValueError, match="nothing is painted"):
         paint.export_painting(stl, faces, gcode, [])
+
+
+def _rotation_x(degrees):
+    a = np.radians(degrees)
+    return np.array([[1.0, 0.0, 0.0], [0.0, np.cos(a), -np.sin(a)], [0.0, np.sin(a), np.cos(a)]])
+
+
+TRANSFORMS = {  # scene transforms (Y up) of the 40 x 20 x 40 box centred on the origin; then lifted onto the plate
+    "moved": (np.eye(3), [30.0, 0.0, -20.0]),
+    "rotated": (_rotation_x(90.0), [0.0, 0.0, 0.0]),  # the painted top now faces the front (-Z scene: +Y G-code)
+    "scaled": (np.diag([0.5, 1.5, 1.0]), [0.0, 0.0, 0.0]),
+    "mirrored": (np.diag([1.0, -1.0, 1.0]), [0.0, 0.0, 0.0]),  # upside down: the painted top is the bottom
+}
+
+
+@pytest.mark.parametrize("name", sorted(TRANSFORMS))
+def test_the_painting_follows_the_model_when_moved_rotated_scaled_or_mirrored(name):
+    """The region is the part of the transformed box within 6 mm of the transformed painted face.
+
+    Checked on a grid of points against the box and that face's plane (inside a box the distance to
+    one of its faces is the distance to the face's plane), away from borders by 0.3 mm.  A mirror
+    is applied as Cura applies it: the transform's scale -1 and the mesh re-wound (same face rows).
+    """
+    local, top = _box_local()
+    matrix, move = TRANSFORMS[name]
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = matrix, move
+    world = paint.transform_triangles(m, local)
+    if np.linalg.det(matrix) < 0:
+        world = world[:, [1, 0, 2]]  # MeshData.invertNormals, as Cura's MirrorOperation does
+    world[..., 1] -= world[..., 1].min()  # onto the build plate
+    data = paint.PaintData(len(local))
+    data.add_set(60, 6)
+    data.paint(1, top)
+    gcode = scene_to_gcode(world, WIDTH, DEPTH, False)
+    (region,) = paint.painted_regions(paint.painted_snapshots("box.stl", data, gcode), {"box.stl"})
+    lo, hi = gcode.reshape(-1, 3).min(axis=0), gcode.reshape(-1, 3).max(axis=0)
+    face = gcode[top]
+    normal = paint.unit_normals(face[:1])[0]
+    plane = float(face[0, 0] @ normal)
+    from shapely.geometry import Point
+
+    checked = 0
+    for z in np.linspace(lo[2] + 0.5, hi[2] - 0.5, 7):
+        section = region.at(float(z))
+        for x in np.linspace(lo[0] + 0.5, hi[0] - 0.5, 9):
+            for y in np.linspace(lo[1] + 0.5, hi[1] - 0.5, 9):
+                distance = abs(float(np.array([x, y, z]) @ normal) - plane)
+                if abs(distance - 6.0) < 0.3:
+                    continue
+                assert section.contains(Point(x, y)) == (distance < 6.0), (name, x, y, z, distance)
+                checked += 1
+    assert checked > 300
+    painted_z = face[:, :, 2]
+    if name == "mirrored":
+        assert painted_z.max() == pytest.approx(0.0) and region.z_max == pytest.approx(6.0)
+    if name == "rotated":
+        assert np.ptp(painted_z) == pytest.approx(40.0) and abs(normal[1]) == pytest.approx(1.0)

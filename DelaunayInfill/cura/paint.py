@@ -195,6 +195,12 @@ class PaintData:
     def drop_empty(self) -> None:
         self.sets = [s for s in self.sets if len(s.faces)]
 
+    def set_of_face(self, face) -> int:
+        """The number of the set face `face` is painted in, or 0 when it is not painted."""
+        face = int(face)
+        return next((s.number for s in self.sets
+                     if len(s.faces) and s.faces[min(np.searchsorted(s.faces, face), len(s.faces) - 1)] == face), 0)
+
     def painted_faces(self) -> np.ndarray:
         return _faces(np.concatenate([s.faces for s in self.sets])) if self.sets else np.zeros(0, dtype=np.int64)
 
@@ -272,6 +278,23 @@ def transform_triangles(matrix, triangles) -> np.ndarray:
     m = np.asarray(matrix, dtype=float)
     t = np.asarray(triangles, dtype=float)
     return t @ m[:3, :3].T + m[:3, 3]
+
+
+def signed_volume(triangles) -> float:
+    """The signed volume (mm3) a closed mesh's triangles enclose: > 0 when their normals point outwards."""
+    t = np.asarray(triangles, dtype=float).reshape(-1, 3, 3)
+    return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
+
+
+def outward(triangles) -> np.ndarray:
+    """The triangles with their corners ordered so that their normals point out of the mesh.
+
+    Same rows (face indices hold); corners 1 and 2 swapped throughout when the mesh encloses a
+    negative volume, as after a mirror whose mesh was not re-wound (Cura's mirror re-winds the
+    mesh, but a copy made by Multiply Selected shares the mesh, so mirroring one re-winds both).
+    """
+    t = np.asarray(triangles, dtype=float).reshape(-1, 3, 3)
+    return t[:, [0, 2, 1]] if signed_volume(t) < 0.0 else t
 
 
 def unit_normals(triangles) -> np.ndarray:
@@ -436,6 +459,25 @@ def export_painting(stl_path, faces_path, gcode_triangles, faces) -> tuple:
         json.dump({"faces": [int(f) for f in faces]}, stream)
         stream.write("\n")
     return os.fspath(stl_path), os.fspath(faces_path)
+
+
+def local_path(chosen) -> str:
+    """A file dialog's choice (a ``file:`` URL, as QML's FileDialog gives it, or a plain path) as a local path."""
+    from urllib.parse import unquote, urlparse
+
+    text = os.fspath(chosen) if not isinstance(chosen, str) else chosen
+    text = text.strip()
+    if not text:
+        raise ValueError("no file chosen")
+    if text.lower().startswith("file:"):
+        parsed = urlparse(text)
+        path = unquote(parsed.path)
+        if parsed.netloc and parsed.netloc != "localhost":
+            path = f"//{parsed.netloc}{path}"
+        if len(path) > 2 and path[0] == "/" and path[2] == ":":  # file:///C:/... on Windows
+            path = path[1:]
+        return os.path.normpath(path)
+    return os.path.normpath(os.path.expanduser(text))
 
 
 def export_paths(stem) -> tuple:

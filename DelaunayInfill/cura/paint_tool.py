@@ -26,6 +26,7 @@ on no build plate, so Cura neither slices, lists, saves nor measures it.
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 
@@ -34,6 +35,7 @@ from UM.Event import Event, MouseEvent
 from UM.Logger import Logger
 from UM.Operations.Operation import Operation
 from UM.Scene.Iterator.DepthFirstIterator import DepthFirstIterator
+from UM.Scene.SceneNodeDecorator import SceneNodeDecorator
 from UM.Scene.Selection import Selection
 
 from . import paint
@@ -45,9 +47,11 @@ PREF_PAINT_DEPTH = "delaunay_infill/paint_depth_mm"
 PREF_EXPORT_FOLDER = "delaunay_infill/paint_export_folder"
 
 PAINT_PROPERTIES = ("PaintMode", "BrushSize", "PaintDensity", "PaintDepth", "PaintSets", "ActivePaintSet",
-                    "PaintStatus", "ExportFolder")
+                    "PaintStatus", "ExportFolder", "ExportName")
 
 OVERLAY_OFFSET_MM = 0.12  # how far above the surface the painted faces are drawn
+#: how far (normalized view units, -1..1 across the view) the pointer may move before a press is a drag
+CLICK_SLOP = 0.006
 
 
 def _app():
@@ -115,6 +119,39 @@ def set_node_paint(node, data: paint.PaintData | None) -> None:
     text = data.to_json()
     node.metadata[paint.METADATA_KEY] = text
     _parsed[id(node)] = (text, data.copy())
+    ensure_carrier(node)
+
+
+class PaintCarrierDecorator(SceneNodeDecorator):
+    """Carries a model's painting into its copies (Cura's "Multiply Selected").
+
+    Uranium's ``SceneNode.__deepcopy__`` and Cura's ``CuraSceneNode.__deepcopy__`` (4.13 and 5.x)
+    copy a node's mesh, transformation, name and decorators, but not ``node.metadata``, where the
+    painting lives, so a copy came out unpainted.  Decorators are deep-copied and then handed
+    their new node (``addDecorator`` calls ``setNode``): this one's copy takes the painting's
+    JSON along and writes it into the new node's metadata.  The copy shares the mesh, so the
+    face indices hold.  It has no decorations of its own (``callDecoration`` finds nothing here).
+    """
+
+    def __init__(self, carried: str | None = None):
+        super().__init__()
+        self._carried = carried
+
+    def setNode(self, node) -> None:
+        super().setNode(node)
+        metadata = getattr(node, "metadata", None)
+        if self._carried and isinstance(metadata, dict) and paint.METADATA_KEY not in metadata:
+            metadata[paint.METADATA_KEY] = self._carried
+        self._carried = None
+
+    def __deepcopy__(self, memo):
+        return type(self)(_metadata_text(self._node) if self._node is not None else None)
+
+
+def ensure_carrier(node) -> None:
+    """Give a painted model the decorator that carries its painting into copies (once)."""
+    if not any(isinstance(d, PaintCarrierDecorator) for d in node.getDecorators()):
+        node.addDecorator(PaintCarrierDecorator())
 
 
 def local_triangles(node) -> np.ndarray:
@@ -296,6 +333,8 @@ class PaintOverlays:
             if key not in models or self._by_model[key][0] is not models[key]:
                 self._remove(key)
         for model in models.values():
+            if _metadata_text(model) is not None:
+                ensure_carrier(model)  # a model read from a project: its copies keep the painting
             if _metadata_text(model) is not None or id(model) in self._by_model:
                 self.update(model)
 
@@ -325,10 +364,11 @@ class PaintToolMixin:
         preferences.addPreference(PREF_BRUSH, 6.0)
         preferences.addPreference(PREF_PAINT_DENSITY, 60.0)
         preferences.addPreference(PREF_PAINT_DEPTH, 4.0)
-        preferences.addPreference(PREF_EXPORT_FOLDER, os.path.join(os.path.expanduser("~"), "DelaunayInfill-paint"))
+        preferences.addPreference(PREF_EXPORT_FOLDER, os.path.expanduser("~"))
         self._paint_mode = "place"
         self._active_paint_set = 0  # 0: the next stroke starts a new set
         self._stroke = None
+        self._press = None  # a press on the model not yet moved: a click or the start of a drag
         self._paint_status = ""
         self.setExposedProperties(*self.getExposedProperties(), *PAINT_PROPERTIES)
         _OVERLAYS = self._paint_overlays = PaintOverlays()
@@ -393,11 +433,11 @@ class PaintToolMixin:
         self.propertyChanged.emit()
 
     def getExportFolder(self) -> str:
-        return str(_app().getPreferences().getValue(PREF_EXPORT_FOLDER) or "")
-
-    def setExportFolder(self, folder) -> None:
-        _app().getPreferences().setValue(PREF_EXPORT_FOLDER, os.path.expanduser(str(folder)))
-        self.propertyChanged.emit()
+        """The save dialog's start folder: where the last export went (a ``file:`` URL for QML)."""
+        folder = str(_app().getPreferences().getValue(PREF_EXPORT_FOLDER) or os.path.expanduser("~"))
+        if not os.path.isdir(folder):
+            folder = os.path.expanduser("~")
+        return Path(os.path.abspath(folder)).as_uri()
 
     def getActivePaintSet(self) -> int:
         return int(self._active_paint_set)
@@ -479,34 +519,50 @@ class PaintToolMixin:
             self._active_paint_set = 0
         return self._changePainting(model, painting, f"delete set {number}")
 
-    def exportPaintSet(self, number, folder: str | None = None):
+    def getExportName(self) -> str:
+        """The export's suggested file name for the highlighted set: ``<model>_paint<n>.stl``."""
+        model = self._selectedModel()
+        name = os.path.splitext(model.getName())[0] if model is not None else ""
+        return f"{name or 'model'}_paint{max(self._active_paint_set, 1)}.stl"
+
+    def exportPaintSet(self, number, chosen):
         """Write the selected model as MODEL.stl (G-code coordinates) and set `number` as FACES.json.
 
+        `chosen` is what the panel's save dialog gives (a ``file:`` URL, or a path): ``X.stl``
+        writes ``X.stl`` and ``X.faces.json``.  Its folder becomes the dialog's next start.
         Returns the two paths (also shown in the panel), or None.
         """
         model = self._selectedModel()
         painting = node_paint(model) if model is not None else None
         target = painting.get(number) if painting else None
         if target is None:
+            self._paint_status = f"Nothing to export: no painted set P{number}"
+            self.propertyChanged.emit()
             return None
-        folder = os.path.expanduser(folder or self.getExportFolder())
         try:
-            os.makedirs(folder, exist_ok=True)
-            name = os.path.splitext(model.getName())[0] or "model"
-            stl, faces = paint.export_paths(os.path.join(folder, f"{name}_paint{target.number}"))
+            stl, faces = paint.export_paths(paint.local_path(chosen))
+            os.makedirs(os.path.dirname(stl) or ".", exist_ok=True)
             paint.export_painting(stl, faces, scene_to_gcode(world_triangles(model), *_machine_frame()), target.faces)
         except (OSError, ValueError) as error:
             self._paint_status = f"Could not export: {error}"
             self.propertyChanged.emit()
             return None
+        _app().getPreferences().setValue(PREF_EXPORT_FOLDER, os.path.dirname(stl))
         self._paint_status = (f"Wrote {stl} and {os.path.basename(faces)}: --paint "
                               f"{os.path.basename(stl)}:{os.path.basename(faces)}:{target.density:g}:{target.depth:g}")
         self.propertyChanged.emit()
         return stl, faces
 
-    def exportSelectedPaintSet(self, number) -> None:
-        """Panel button (triggerActionWithData)."""
-        self.exportPaintSet(int(number))
+    def exportChosenPaintSet(self, data):
+        """Panel: the save dialog's choice, ``{"number": n, "file": url}`` (triggerActionWithData); the paths or None."""
+        from .region_tool import _as_mapping
+
+        data = _as_mapping(data)
+        try:
+            number = int(data.get("number", 0))
+        except (TypeError, ValueError):
+            number = 0
+        return self.exportPaintSet(number, str(data.get("file") or ""))
 
     def paintStroke(self, model, world_points, erase: bool = False, brush: float | None = None, view_direction=None):
         """Paint (or erase) along world points on `model` as one undoable stroke (Python API and tests)."""
@@ -525,7 +581,7 @@ class PaintToolMixin:
         if not erase and working.get(number) is None:
             number = working.add_set(self.getPaintDensity(), self.getPaintDepth()).number
         self._stroke = {"model": model, "before": before, "data": working, "number": number, "erase": erase,
-                        "triangles": world_triangles(model), "last": None, "changed": False}
+                        "triangles": paint.outward(world_triangles(model)), "last": None, "changed": False}
         _app().getController().toolOperationStarted.emit(self)
         return True
 
@@ -585,7 +641,14 @@ class PaintToolMixin:
         return point, face, direction / max(np.linalg.norm(direction), 1e-300)
 
     def _paintEvent(self, event):
-        """Handle a mouse event in paint/erase mode: True (used), or None (not a paint event)."""
+        """Handle a mouse event in paint/erase mode: True (used), or None (not a paint event).
+
+        A press on the model is held until the pointer moves more than :data:`CLICK_SLOP`: then
+        it is a drag and paints (or erases) from the press point on.  Released where it was
+        pressed it is a click: in paint mode a click on a painted face selects that face's set
+        (the next drag paints into it) and paints nothing; a click on an unpainted face, or any
+        click in erase mode, paints (erases) one brush dab there.
+        """
         if self._paint_mode == "place":
             return None
         if event.type == Event.MousePressEvent and MouseEvent.LeftButton in event.buttons:
@@ -597,12 +660,15 @@ class PaintToolMixin:
             picked = self._pickOnModel(model, event.x, event.y)
             if picked is None:
                 return None
-            self._startStroke(model, self._paint_mode == "erase")
-            self._brushAt(picked[0], picked[2], picked[1])
+            self._press = {"model": model, "x": event.x, "y": event.y, "picked": picked}
             return True
-        if self._stroke is None:
+        if self._stroke is None and self._press is None:
             return None
         if event.type == Event.MouseMoveEvent:
+            if self._stroke is None:
+                if max(abs(event.x - self._press["x"]), abs(event.y - self._press["y"])) <= CLICK_SLOP:
+                    return True  # still a click
+                self._startPressedStroke()
             picked = self._pickOnModel(self._stroke["model"], event.x, event.y)
             if picked is not None:
                 self._brushAt(picked[0], picked[2], picked[1])
@@ -610,9 +676,32 @@ class PaintToolMixin:
                 self._stroke["last"] = None  # off the model: do not join the next point to this one
             return True
         if event.type == Event.MouseReleaseEvent:
-            self._finishStroke()
+            if self._stroke is None:
+                self._click(self._press)
+            else:
+                self._finishStroke()
+            self._press = None
             return True
         return None
+
+    def _startPressedStroke(self) -> None:
+        """Start a stroke with a dab where the held press was."""
+        press = self._press
+        self._startStroke(press["model"], self._paint_mode == "erase")
+        point, face, direction = press["picked"]
+        self._brushAt(point, direction, face)
+
+    def _click(self, press) -> None:
+        """A click on the model: select the clicked face's set (paint mode), else one dab."""
+        if press is None:
+            return
+        painting = node_paint(press["model"])
+        number = painting.set_of_face(press["picked"][1]) if painting and self._paint_mode == "paint" else 0
+        if number:
+            self.selectPaintSet(number)
+            return
+        self._startPressedStroke()
+        self._finishStroke()
 
     # -- keeping overlays in step --
     def _onPaintSceneChanged(self, node) -> None:

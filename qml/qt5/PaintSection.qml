@@ -4,6 +4,7 @@
 import QtQuick 2.15
 import QtQuick.Controls 2.15
 import QtQuick.Layouts 1.15
+import QtQuick.Dialogs 1.3
 
 import UM 1.2 as UM
 import Cura 1.0 as Cura
@@ -231,25 +232,38 @@ Column
     }
 
     // ---- export for the command line (delaunay-infill process --paint MODEL.stl:FACES.json:PCT:DEPTH) ----
+    // Export asks where to write MODEL.stl (a save dialog); FACES.json goes beside it as MODEL.faces.json.
+    FileDialog
+    {
+        id: exportDialog
+        objectName: "exportDialog"
+        property int number: 0
+        readonly property bool savesFile: !selectExisting  // a save dialog (read by the GUI test)
+        title: "Export painted set P" + number + " for the command line (--paint)"
+        selectExisting: false  // a save dialog
+        selectMultiple: false
+        folder: UM.ActiveTool.properties.getValue("ExportFolder") || shortcuts.home
+        nameFilters: ["STL model (*.stl)"]
+        onAccepted: UM.ActiveTool.triggerActionWithData("exportChosenPaintSet", {"number": number, "file": fileUrl.toString()})
+    }
+
     RowLayout
     {
         width: parent.width
         spacing: paintSection.margin
         visible: paintSection.sets.length > 0
-        Cura.TextField
-        {
-            objectName: "exportFolder"
-            Layout.fillWidth: true
-            text: UM.ActiveTool.properties.getValue("ExportFolder") || ""
-            onEditingFinished: UM.ActiveTool.setProperty("ExportFolder", text)
-        }
+        Item { Layout.fillWidth: true; Layout.preferredHeight: 1 }
         Cura.SecondaryButton
         {
             objectName: "exportPaintSet"
-            text: "Export"
-            tooltip: "Write the model as MODEL.stl and the highlighted set as FACES.json into this folder, for the command line's --paint"
+            text: "Export..."
+            tooltip: "Save the model as MODEL.stl and the highlighted set as MODEL.faces.json, for the command line's --paint"
             enabled: paintSection.activeSet > 0
-            onClicked: UM.ActiveTool.triggerActionWithData("exportSelectedPaintSet", paintSection.activeSet)
+            onClicked:
+            {
+                exportDialog.number = paintSection.activeSet
+                exportDialog.open()
+            }
         }
     }
 

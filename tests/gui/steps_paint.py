@@ -210,12 +210,114 @@ def set_paint_values(ctx, label: str, density: float, depth: float):
     yield 0.3
 
 
-def export_paint(ctx, model: str, number: int, folder: str):
+def click_select_set(ctx, model: str, point: list, z: float):
+    """With "New set" active, a real mouse click (no drag) on a painted face: its set is selected, nothing painted."""
     tool = regions._tool(ctx)
-    paths = tool.exportPaintSet(number, folder)
-    ctx.record("paint_export", {"paths": list(paths) if paths else None, "status": tool.getPaintStatus()})
-    if False:
-        yield
+    tool.newPaintSet()
+    yield 0.3
+    stack = ctx.app.getOperationStack()
+    out = {"active_before": tool.getActivePaintSet(), "rows_before": _rows(ctx), "ops_before": len(stack.getOperations())}
+    px, py = _pixel(ctx, regions._model_point(ctx, model, point, z))
+    yield from _xdotool(ctx, ["mousemove", px, py, "sleep", "0.4", "click", "1", "sleep", "0.3", "mousemove", 5, 5])
+    yield 0.8
+    out.update(active_after=tool.getActivePaintSet(), rows_after=_rows(ctx), ops_after=len(stack.getOperations()))
+    ctx.record("paint_click", out)
+
+
+def export_paint(ctx, model: str, number: int, path: str, screenshot: str = ""):
+    """Export through the panel: its Export button opens a save dialog; the chosen file goes to the tool.
+
+    The button is clicked (a real mouse event on it), the dialog is seen open and cancelled; then the
+    tool's slot is driven with `path` as a file URL, exactly what the dialog's accept hands over.
+    """
+    try:
+        from PyQt6.QtCore import QMetaObject, QUrl
+    except ImportError:
+        from PyQt5.QtCore import QMetaObject, QUrl
+    tool = regions._tool(ctx)
+    tool.selectPaintSet(number)
+    yield 0.5
+    button = regions._qml_object(ctx, "exportPaintSet")
+    dialog = regions._qml_object(ctx, "exportDialog")
+    out = {"button": button is not None, "dialog": dialog is not None}
+    if button is not None and dialog is not None:
+        regions._click(ctx, button)
+        yield ctx.wait_until(lambda: bool(dialog.property("visible")), 20, "the export dialog open")
+        yield 1.0
+        if screenshot:
+            subprocess.run(["/usr/bin/import", "-window", "root", screenshot], check=True, timeout=60)
+        out["opened"] = bool(dialog.property("visible"))
+        out["number"] = dialog.property("number")
+        out["save_mode"] = dialog.property("savesFile")  # Qt 6: fileMode SaveFile; Qt 5: not selectExisting
+        out["title"] = dialog.property("title")
+        QMetaObject.invokeMethod(dialog, "reject")
+        yield 1.0
+        out["closed"] = not bool(dialog.property("visible"))
+    paths = tool.exportChosenPaintSet({"number": number, "file": QUrl.fromLocalFile(path).toString()})
+    yield 0.3
+    stem = os.path.splitext(path)[0]
+    out.update(paths=[stem + ".stl", stem + ".faces.json"], status=tool.getPaintStatus(),
+               folder=tool.getExportFolder(), name=tool.getExportName(), returned=paths)
+    ctx.record("paint_export", out)
+
+
+def _painted_models(ctx, model: str) -> list:
+    return [n for n in ctx.nodes() if n.getName() == model]
+
+
+def multiply_and_mirror(ctx, model: str):
+    """Cura's Multiply Selected (one copy, the menu's CuraActions.multiplySelection), then mirror the copy upside down."""
+    from UM.Math.Vector import Vector
+    from UM.Operations.MirrorOperation import MirrorOperation
+    from UM.Scene.Selection import Selection
+
+    module = _paint_tool_module()
+    (original,) = _painted_models(ctx, model)
+    Selection.clear()
+    Selection.add(original)
+    yield 0.3
+    actions = getattr(ctx.app, "_cura_actions", None)
+    if actions is None:
+        raise RuntimeError("Cura has no CuraActions")
+    actions.multiplySelection(1)
+    from UM.Scene.Iterator.DepthFirstIterator import DepthFirstIterator
+
+    def copies():
+        root = ctx.app.getController().getScene().getRoot()
+        return [n for n in DepthFirstIterator(root) if n is not original and n.getMeshData() is not None
+                and n.getMeshData() is original.getMeshData()]
+
+    for _ in range(60):
+        if copies():
+            break
+        yield 0.5
+    root = ctx.app.getController().getScene().getRoot()
+    ctx.record("multiply_nodes", [[type(n).__name__, n.getName(), bool(n.callDecoration("isSliceable")),
+                                   type(n.getParent()).__name__ if n.getParent() else None,
+                                   [type(d).__name__ for d in n.getDecorators()]] for n in DepthFirstIterator(root)])
+    if not copies():
+        raise RuntimeError("no multiplied copy in the scene")
+    yield 2.0  # arranged
+    (copy,) = copies()
+    out = {"copy_json": json.loads(module.node_paint(copy).to_json()) if module.node_paint(copy) else None,
+           "original_json": json.loads(module.node_paint(original).to_json()) if module.node_paint(original) else None,
+           "shares_mesh": copy.getMeshData() is original.getMeshData()}
+    MirrorOperation(copy, Vector(1, -1, 1), mirror_around_center=True).push()
+    yield 2.0
+    Selection.clear()
+    Selection.add(original)
+    yield 0.5
+    for key, node in (("original", original), ("copy", copy)):
+        box = node.getBoundingBox()
+        tri = module.world_triangles(node)
+        data = module.node_paint(node)
+        painted = tri[data.sets[0].faces] if data else np.zeros((0, 3, 3))
+        out[key] = {"centre": regions._plugin_module("region_shapes").scene_to_gcode(
+                        [box.center.x, box.center.y, box.center.z], *regions._frame(ctx)).tolist(),
+                    "painted_height": [float(painted[:, :, 1].min()), float(painted[:, :, 1].max())] if len(painted) else None,
+                    "bottom": float(box.bottom), "top": float(box.top)}
+    out["overlays"] = sorted(o.getName() for o in module._overlays().nodes())
+    ctx.record("multiply", out)
 
 
 def save_project(ctx, path: str):

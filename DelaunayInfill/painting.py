@@ -145,8 +145,8 @@ def _extra_directions(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.arctan2(vec[..., 1], vec[..., 0]) % (2.0 * math.pi), defined
 
 
-def _support(p: np.ndarray, a: np.ndarray, depth: float, phi: np.ndarray) -> np.ndarray:
-    """Support function of the sections of ``T + ball(depth)``, one direction per row.
+def _support(p: np.ndarray, a: np.ndarray, depth: float, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Support function of the sections of ``T + ball(depth)``, one direction per row, and a touching point.
 
     Parameters
     ----------
@@ -161,10 +161,21 @@ def _support(p: np.ndarray, a: np.ndarray, depth: float, phi: np.ndarray) -> np.
 
     Returns
     -------
-    ndarray, shape (k,)
+    h : ndarray, shape (k,)
         ``max u·q`` over the section, ``u = (cos phi, sin phi)``, mm.
+    touch : ndarray, shape (k, 2)
+        A point of the section on its support line ``u·q = h`` (same origin as `p`), mm.
+    touched : ndarray of bool, shape (k,)
+        Where `touch` is known to be such a point (else it is not to be used).
+
+    Notes
+    -----
+    At the minimising slope t the solid's touching point in direction ``w = (u, t)`` is
+    ``P_i + depth w / |w|`` for the corner i that attains the maximum, or a point of the edge
+    between the two that tie; its height is 0 where the minimum is stationary (checked).
     """
-    dots = p[:, :, 0] * np.cos(phi)[:, None] + p[:, :, 1] * np.sin(phi)[:, None]  # (k, 3)
+    c_phi, s_phi = np.cos(phi), np.sin(phi)
+    dots = p[:, :, 0] * c_phi[:, None] + p[:, :, 1] * s_phi[:, None]  # (k, 3)
     c = -a / depth  # stationary point of each corner's piece: t / sqrt(1 + t^2) = c
     i, j = np.array([0, 1, 2]), np.array([1, 2, 0])
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -173,7 +184,27 @@ def _support(p: np.ndarray, a: np.ndarray, depth: float, phi: np.ndarray) -> np.
         t = np.concatenate([stationary, kinks], axis=1)  # (k, 6)
         t = np.where(np.isfinite(t), t, np.nan)
         g = (dots[:, None, :] + t[:, :, None] * a[:, None, :]).max(axis=2) + depth * np.sqrt(1.0 + t * t)
-    return np.where(np.isnan(g), np.inf, g).min(axis=1)
+    g = np.where(np.isnan(g), np.inf, g)
+    best = np.argmin(g, axis=1)
+    rows = np.arange(len(g))
+    h = g[rows, best]
+    slope = np.nan_to_num(t[rows, best])
+    norm = np.sqrt(1.0 + slope * slope)
+    lift, reach = depth * slope / norm, depth / norm  # the offset's height and plan-view length
+    values = dots + slope[:, None] * a  # (k, 3): each corner's piece at the slope
+    order = np.argsort(-values, axis=1)
+    first, second = order[:, 0], order[:, 1]
+    a1, a2 = a[rows, first], a[rows, second]
+    scale = 1.0 + np.abs(values).max(axis=1)
+    tie = values[rows, first] - values[rows, second] <= 1e-9 * scale
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(tie & (np.abs(a1 - a2) > 1e-12), (a1 + lift) / (a1 - a2), 0.0)
+    share = np.where(np.abs(a1 + lift) <= 1e-7 * (1.0 + depth), 0.0, share)  # the corner alone is at height 0
+    height = a1 + share * (a2 - a1) + lift
+    touched = np.isfinite(h) & (share >= -1e-9) & (share <= 1.0 + 1e-9) & (np.abs(height) <= 1e-6 * (1.0 + depth))
+    p1, p2 = p[rows, first], p[rows, second]
+    touch = p1 + share[:, None] * (p2 - p1) + reach[:, None] * np.stack([c_phi, s_phi], axis=1)
+    return h, touch, touched
 
 
 def _group_neighbours(owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -196,17 +227,43 @@ def _corners(phi: np.ndarray, h: np.ndarray, nxt: np.ndarray) -> np.ndarray:
         return np.stack([(h * s1 - h1 * s) / det, (c * h1 - c1 * h) / det], axis=1)
 
 
+def _segment_distances(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from each point q to the segment [a, b], all shape (N, 2), mm."""
+    ab = b - a
+    s = np.clip(np.einsum("ij,ij->i", q - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300), 0.0, 1.0)
+    return np.hypot(*(q - (a + s[:, None] * ab)).T)
+
+
+def _corner_errors(q: np.ndarray, touch: np.ndarray, touched: np.ndarray, nxt: np.ndarray,
+                   prv: np.ndarray) -> np.ndarray:
+    """How far each corner may lie outside the true section (an upper bound), shape (N,) mm.
+
+    Corner i lies on support lines i and next(i).  Where both lines' touching points are known,
+    the true section's border between them lies in the triangle they make with the corner
+    (convexity), and the section holds the chord between them: the corner is at most its
+    distance to that chord outside.  Elsewhere the bound is the corner's distance to the line
+    through its neighbouring corners (the polygon's own triangle round it).
+    """
+    chord = _segment_distances(q, touch, touch[nxt])
+    base = q[nxt] - q[prv]
+    span = np.hypot(base[:, 0], base[:, 1])
+    cross = np.abs(base[:, 0] * (q[:, 1] - q[prv, 1]) - base[:, 1] * (q[:, 0] - q[prv, 0]))
+    loose = np.where(span > 1e-12, cross / np.maximum(span, 1e-300), np.hypot(*(q - q[prv]).T))
+    known = touched & touched[nxt] & np.isfinite(chord)
+    return np.where(known, np.minimum(chord, loose), loose)
+
+
 def neighbourhood_corners(triangles: np.ndarray, depth: float, z: float, *,
                           tolerance: float = DEFAULT_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
     """Each triangle's ``T + ball(depth)`` cut at height `z`, as the corners of a convex polygon.
 
     The polygon is the intersection of the section's supporting half-planes in a set of
     directions: 32 uniform ones, the normals of the section's straight parts, and more where a
-    corner may lie farther than `tolerance` outside the true section (a corner lies within the
-    triangle it makes with its neighbours, so its distance to the line through them bounds its
-    error); up to 8 rounds of refinement.  Only triangles whose neighbourhood reaches strictly past
-    the plane (``min z - depth < z < max z + depth``) are kept: a plane that only touches one
-    has no area there.
+    corner may lie farther than `tolerance` outside the true section (:func:`_corner_errors`);
+    up to 8 rounds of refinement, each new direction inserted in place (the rows stay in
+    angular order per triangle, so nothing is sorted again).  Only triangles whose
+    neighbourhood reaches strictly past the plane (``min z - depth < z < max z + depth``) are
+    kept: a plane that only touches one has no area there.
 
     Parameters
     ----------
@@ -243,65 +300,112 @@ def neighbourhood_corners(triangles: np.ndarray, depth: float, z: float, *,
     uniform = np.arange(_START) * (2.0 * math.pi / _START)
     owner = np.concatenate([np.repeat(np.arange(k), _START), np.repeat(np.arange(k), _EXTRA)[defined.ravel()]])
     phi = np.concatenate([np.tile(uniform, k), extra[defined]])
-    h = _support(p[owner], a[owner], depth, phi)
+    order = np.lexsort((phi, owner))  # once: later directions are inserted in place
+    owner, phi = owner[order], phi[order]
+    h, touch, touched = _support(p[owner], a[owner], depth, phi)
     for round_ in range(_ROUNDS + 1):
-        order = np.lexsort((phi, owner))
-        owner, phi, h = owner[order], phi[order], h[order]
         # (nearly) equal directions: keep one (their corner is undefined, their edge empty)
-        nxt, _ = _group_neighbours(owner)
+        nxt, prv = _group_neighbours(owner)
         gap = (phi[nxt] - phi) % (2.0 * math.pi)
         dup = gap < _SAME_ANGLE
         if dup.any():
             keep = ~dup
-            owner, phi, h = owner[keep], phi[keep], h[keep]
-            nxt, _ = _group_neighbours(owner)
+            owner, phi, h, touch, touched = owner[keep], phi[keep], h[keep], touch[keep], touched[keep]
+            nxt, prv = _group_neighbours(owner)
             gap = (phi[nxt] - phi) % (2.0 * math.pi)
         q = _corners(phi, h, nxt)
         if round_ == _ROUNDS:
             break
-        # a corner's error is at most its distance to the line through its neighbours
-        _, prv = _group_neighbours(owner)
-        base = q[nxt] - q[prv]
-        span = np.hypot(base[:, 0], base[:, 1])
-        cross = np.abs(base[:, 0] * (q[:, 1] - q[prv, 1]) - base[:, 1] * (q[:, 0] - q[prv, 0]))
-        err = np.where(span > 1e-12, cross / np.maximum(span, 1e-300),
-                       np.hypot(*(q - q[prv]).T))
-        bad = np.flatnonzero(err > tolerance)
+        bad = np.flatnonzero(_corner_errors(q, touch, touched, nxt, prv) > tolerance)
         if len(bad) == 0:
             break
         new_phi = (phi[bad] + 0.5 * gap[bad]) % (2.0 * math.pi)
         new_owner = owner[bad]
-        new_h = _support(p[new_owner], a[new_owner], depth, new_phi)
-        owner, phi, h = np.r_[owner, new_owner], np.r_[phi, new_phi], np.r_[h, new_h]
+        new_h, new_touch, new_touched = _support(p[new_owner], a[new_owner], depth, new_phi)
+        at = bad + 1  # between line i and the next one of its triangle: after row i
+        owner, phi, h = np.insert(owner, at, new_owner), np.insert(phi, at, new_phi), np.insert(h, at, new_h)
+        touch, touched = np.insert(touch, at, new_touch, axis=0), np.insert(touched, at, new_touched)
     return q + centre[owner], kept[owner]
 
 
-def _polygons(corners: np.ndarray, owner: np.ndarray) -> list:
-    """One convex Polygon per owner from its corners in order (its hull where rounding made it invalid)."""
+def _convex_rings(corners: np.ndarray, owner: np.ndarray) -> np.ndarray:
+    """Which owners' corners make a convex counter-clockwise ring of some area, shape (N,) bool per corner.
+
+    Rounding can make a corner of nearly parallel support lines fall a little the wrong way; such
+    a ring is not a valid polygon (its convex hull is used instead).
+    """
+    nxt, prv = _group_neighbours(owner)
+    e1, e2 = corners - corners[prv], corners[nxt] - corners
+    turn = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    size = np.maximum(np.hypot(*e1.T) * np.hypot(*e2.T), 1e-300)
+    ok_corner = np.isfinite(turn) & (turn >= -1e-9 * size)
+    _, ids = np.unique(owner, return_inverse=True)
+    ok = np.ones(ids.max() + 1 if len(ids) else 0, dtype=bool)
+    np.logical_and.at(ok, ids, ok_corner)
+    area = np.zeros(len(ok))  # twice the signed area (shoelace): a flat ring is no polygon
+    np.add.at(area, ids, np.where(np.isfinite(turn), corners[prv, 0] * corners[:, 1] - corners[:, 0] * corners[prv, 1], 0.0))
+    return (ok & (area > 0.0))[ids]
+
+
+def _multipolygon_wkb(corners: np.ndarray, owner: np.ndarray) -> bytes:
+    """WKB of a MultiPolygon with one ring per owner (its corners, closed), built in numpy (no Python loop)."""
     cuts = np.flatnonzero(owner[1:] != owner[:-1]) + 1
+    starts = np.r_[0, cuts]
+    counts = np.diff(np.r_[starts, len(corners)]) + 1  # closed rings
+    closed = np.insert(corners, np.r_[cuts, len(corners)], corners[starts], axis=0).astype("<f8")
+    header = np.zeros(len(starts), dtype=np.dtype([("order", "u1"), ("kind", "<u4"), ("rings", "<u4"), ("points", "<u4")]))
+    header["order"], header["kind"], header["rings"], header["points"] = 1, 3, 1, counts
+    sizes = header.dtype.itemsize + 16 * counts
+    offsets = 9 + np.r_[0, np.cumsum(sizes)[:-1]]
+    out = np.empty(9 + int(sizes.sum()), dtype=np.uint8)
+    top = np.array([(1, 6, len(starts))], dtype=[("order", "u1"), ("kind", "<u4"), ("parts", "<u4")])
+    out[:9] = np.frombuffer(top.tobytes(), dtype=np.uint8)
+    width = header.dtype.itemsize
+    out[(offsets[:, None] + np.arange(width)).ravel()] = np.frombuffer(header.tobytes(), dtype=np.uint8)
+    coord_bytes = np.frombuffer(closed.tobytes(), dtype=np.uint8)
+    first = np.repeat(offsets + width, 16 * counts)
+    local = np.arange(len(coord_bytes)) - np.repeat(np.r_[0, np.cumsum(16 * counts)[:-1]], 16 * counts)
+    out[first + local] = coord_bytes
+    return out.tobytes()
+
+
+def _union_of_convex(corners: np.ndarray, owner: np.ndarray):
+    """The union of the convex polygons of corners grouped by owner (MultiPolygon, possibly empty).
+
+    Rings that rounding made non-convex are replaced by their corners' convex hull.  On
+    shapely 2 the polygons are made and united with its array functions; on shapely 1.8 as one
+    MultiPolygon built as WKB and united by GEOS directly (neither loops in Python over them).
+    """
+    if len(corners) == 0:
+        return empty_area()
+    convex = _convex_rings(corners, owner)
+    parts = []
     if SHAPELY2:
         import shapely
 
-        _, ids = np.unique(owner, return_inverse=True)
-        closed = np.insert(corners, np.r_[cuts, len(corners)], corners[np.r_[0, cuts]], axis=0)
-        closed_ids = np.insert(ids, np.r_[cuts, len(corners)], ids[np.r_[0, cuts]])
-        polys = shapely.polygons(shapely.linearrings(closed, indices=closed_ids))
-        bad = ~shapely.is_valid(polys)
-        if bad.any():
-            hull = shapely.convex_hull(shapely.multipoints(corners, indices=ids))
-            polys[bad] = hull[bad]
-        polys = polys[(shapely.get_type_id(polys) == 3) & (shapely.area(polys) > 0.0)]
-        return list(polys)
-    from shapely.geometry import MultiPoint, Polygon  # pragma: no cover - shapely 1.8
+        if convex.any():
+            parts.append(shapely.from_wkb(_multipolygon_wkb(corners[convex], owner[convex])))
+        if not convex.all():
+            _, ids = np.unique(owner[~convex], return_inverse=True)
+            hulls = shapely.convex_hull(shapely.multipoints(corners[~convex], indices=ids))
+            parts.extend(hulls[(shapely.get_type_id(hulls) == 3) & (shapely.area(hulls) > 0.0)])
+        return to_multipolygon(shapely.union_all(parts)) if parts else empty_area()
+    from shapely import wkb  # pragma: no cover - shapely 1.8
+    from shapely.geometry import MultiPoint  # pragma: no cover
+    from shapely.geometry.base import geom_factory  # pragma: no cover
+    from shapely.geos import lgeos  # pragma: no cover
 
-    out = []  # pragma: no cover
-    for c in np.split(corners, cuts):  # pragma: no cover
-        p = Polygon(c.tolist())
-        if not p.is_valid:
-            p = MultiPoint(c.tolist()).convex_hull
-        if p.geom_type == "Polygon" and p.area > 0.0:
-            out.append(p)
-    return out  # pragma: no cover
+    if convex.any():  # pragma: no cover
+        many = wkb.loads(_multipolygon_wkb(corners[convex], owner[convex]))
+        parts.append(geom_factory(lgeos.methods["unary_union"](many._geom)))
+    if not convex.all():  # pragma: no cover - rare: a few rings only
+        bad_owner, bad_corners = owner[~convex], corners[~convex]
+        cuts = np.flatnonzero(bad_owner[1:] != bad_owner[:-1]) + 1
+        hulls = (MultiPoint(c.tolist()).convex_hull for c in np.split(bad_corners, cuts))
+        parts.extend(h for h in hulls if h.geom_type == "Polygon" and h.area > 0.0)
+    if not parts:  # pragma: no cover
+        return empty_area()
+    return to_multipolygon(parts[0] if len(parts) == 1 else unary_union(parts))  # pragma: no cover
 
 
 def point_distances(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -436,12 +540,9 @@ def neighbourhood_section(triangles: np.ndarray, depth: float, z: float, *,
     cone = np.asarray(cone, dtype=float)
     bounding = near & _may_bound(tri, float(depth), z, cone)
     corners, owner = neighbourhood_corners(tri[bounding], depth, z, tolerance=tolerance)
-    if len(corners) == 0:
+    union = _union_of_convex(corners, owner)
+    if union.is_empty:
         return empty_area()
-    polygons = _polygons(corners, owner)
-    if not polygons:
-        return empty_area()
-    union = to_multipolygon(polygons[0] if len(polygons) == 1 else unary_union(polygons))
     holes = [(k, h) for k, p in enumerate(union.geoms) for h in range(len(p.interiors))]
     if not holes:
         return union

@@ -225,6 +225,46 @@ def test_triangle_section_is_convex_and_holds_the_triangles_own_section(seed):
             assert poly.buffer(1e-6).covers(line.buffer(depth, 64).buffer(-2e-3 * depth))
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_touching_points_are_on_the_sections_border_and_their_support_lines(seed):
+    """The refinement's error bound rests on them: each known touching point lies on its direction's
+    support line and at exactly `depth` from the triangle (the section's border)."""
+    from DelaunayInfill.painting import _support
+
+    checked = 0
+    for tri, depth, z in _random_triangles(200 + seed, 10):
+        phi = np.linspace(0.0, 2.0 * np.pi, 90, endpoint=False)
+        p = np.repeat(tri[None, :, :2], len(phi), axis=0)
+        a = np.repeat(tri[None, :, 2] - z, len(phi), axis=0)
+        h, touch, touched = _support(p, a, depth, phi)
+        ok = touched & np.isfinite(h)
+        if not ok.any():
+            continue
+        u = np.stack([np.cos(phi), np.sin(phi)], axis=1)
+        assert np.allclose(np.einsum("ij,ij->i", touch[ok], u[ok]), h[ok], atol=1e-7)
+        distance = point_distances(np.c_[touch[ok], np.full(ok.sum(), z)], tri[None])
+        assert np.allclose(distance, depth, atol=1e-6)
+        checked += int(ok.sum())
+    assert checked > 500
+
+
+def test_the_polygons_built_as_wkb_are_the_corners_rings():
+    from shapely.geometry import Polygon
+
+    from DelaunayInfill.painting import _multipolygon_wkb, _union_of_convex
+
+    squares = np.array([[0, 0], [2, 0], [2, 2], [0, 2], [1, 1], [3, 1], [3, 3], [1, 3]], dtype=float)
+    owner = np.array([0, 0, 0, 0, 5, 5, 5, 5])
+    from shapely import wkb
+
+    parts = list(wkb.loads(_multipolygon_wkb(squares, owner)).geoms)
+    assert [list(p.exterior.coords) for p in parts] == [list(Polygon(squares[:4]).exterior.coords),
+                                                        list(Polygon(squares[4:]).exterior.coords)]
+    assert _union_of_convex(squares, owner).area == pytest.approx(7.0)
+    bowtie = np.array([[0, 0], [2, 2], [2, 0], [0, 2]], dtype=float)  # not convex: its hull is used
+    assert _union_of_convex(bowtie, np.zeros(4, dtype=np.int64)).area == pytest.approx(4.0)
+
+
 def test_corners_are_in_order_and_tolerance_tightens():
     tri = np.array([[0.0, 0.0, 0.0], [30.0, 2.0, 4.0], [5.0, 25.0, 1.0]])
     loose = neighbourhood_section(tri[None], 2.0, 1.5, tolerance=0.2)
@@ -318,16 +358,14 @@ def test_dome_curved_face_gives_a_shell():
 
 def test_border_culling_changes_nothing():
     """Only triangles that may hold a border point are cut; the holes the others fill are filled."""
-    from shapely.ops import unary_union
-
-    from DelaunayInfill.painting import _polygons
+    from DelaunayInfill.painting import _union_of_convex
 
     model, curved = _dome()
     tri = model[curved]
     for depth, z in ((1.0, 3.0), (3.0, 10.1), (6.0, 16.0)):
         culled = neighbourhood_section(tri, depth, z)
         corners, owner = neighbourhood_corners(tri, depth, z)
-        full = unary_union(_polygons(corners, owner))
+        full = _union_of_convex(corners, owner)
         assert culled.symmetric_difference(full).area < 1e-6 * full.area
 
 

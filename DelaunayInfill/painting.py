@@ -543,17 +543,31 @@ def neighbourhood_section(triangles: np.ndarray, depth: float, z: float, *,
     union = _union_of_convex(corners, owner)
     if union.is_empty:
         return empty_area()
-    holes = [(k, h) for k, p in enumerate(union.geoms) for h in range(len(p.interiors))]
-    if not holes:
-        return union
+    return _fill_gaps(union, tri[near], depth, z)
+
+
+def _fill_gaps(union, triangles: np.ndarray, depth: float, z: float):
+    """`union` with the bounded gaps of it that lie within `depth` of the triangles filled in.
+
+    A gap is a connected piece of the holes of `union`'s parts less `union` itself (a hole of one
+    part may hold another part, as the outer border's ring holds the inner one on a dome).  The
+    union has the true border, so no gap holds a point of it: a gap is wholly inside the region
+    or wholly outside, and one point of it says which (its exact distance to the triangles).
+    """
     from shapely.geometry import Polygon
 
-    parts = [Polygon(union.geoms[k].interiors[h]) for k, h in holes]
-    reps = np.array([p.representative_point().coords[0] for p in parts], dtype=float)
-    inside = point_distances(np.c_[reps, np.full(len(reps), float(z))], tri[near]) <= depth
+    holes = [Polygon(ring) for part in union.geoms for ring in part.interiors]
+    if not holes:
+        return union
+    gaps = to_multipolygon(unary_union(holes).difference(union))
+    gaps = [g for g in gaps.geoms if g.area > 0.0]
+    if not gaps:
+        return union
+    reps = np.array([g.representative_point().coords[0] for g in gaps], dtype=float)
+    inside = point_distances(np.c_[reps, np.full(len(reps), float(z))], triangles) <= depth
     if not inside.any():
         return union
-    return to_multipolygon(unary_union([union, *[p for p, fill in zip(parts, inside) if fill]]))
+    return to_multipolygon(unary_union([union, *[g for g, fill in zip(gaps, inside) if fill]]))
 
 
 def painted_section(model_triangles: np.ndarray, painted_triangles: np.ndarray, depth: float, z: float, *,

@@ -356,6 +356,17 @@ def test_dome_curved_face_gives_a_shell():
         assert_section_matches(section, model[curved], depth, z, within=outer, grid=120)
 
 
+@pytest.mark.parametrize("depth, z", [(2.0, 16.7), (1.0, 18.9), (2.0, 12.0)])
+def test_a_gap_between_the_inner_and_outer_borders_is_filled(depth, z):
+    """On a fine dome only the triangles near the inner and the outer border are cut; between the two
+    rings they leave a gap that lies inside the region.  It is a hole of the outer ring that holds
+    the inner ring: the gap is that hole less the inner ring (the hole's own representative point
+    may lie in the inner ring or in its hole, which said nothing about the gap)."""
+    model, curved = _dome(rings=32, segments=96)
+    section = neighbourhood_section(model[curved], depth, z)
+    assert_section_matches(section, model[curved], depth, z, grid=70)
+
+
 def test_border_culling_changes_nothing():
     """Only triangles that may hold a border point are cut; the holes the others fill are filled."""
     from DelaunayInfill.painting import _union_of_convex

@@ -12,8 +12,6 @@ against the part itself, exactly, by clipping.
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 from shapely.geometry.polygon import orient
 
 from .decomposition import cross_turn
@@ -116,11 +114,20 @@ class CombingArea:
     def __init__(self, part, margin: float, *, tolerance: float = 0.0, max_corners: int = 400):
         self.source = part  # the object it was built from (callers key caches by it)
         self.outline = to_multipolygon(part)
-        self.part = to_multipolygon(self.outline.buffer(tolerance, 4)) if tolerance > 0 else self.outline
+        self.tolerance = float(tolerance)
+        self._part = None if tolerance > 0 else self.outline  # grown on the first travel asked for
         self.margin = float(margin)
         self.max_corners = int(max_corners)
         self.corners: np.ndarray | None = None  # built on the first travel that needs them
         self._memo: dict[tuple, np.ndarray | None] = {}
+
+    @property
+    def part(self):
+        """Where a leg may go: the part grown by `tolerance` (built when first asked: most layers'
+        travels all stay inside the part, and the emitter asks for no combed path then)."""
+        if self._part is None:
+            self._part = to_multipolygon(self.outline.buffer(self.tolerance, 4))
+        return self._part
 
     def _build(self) -> None:
         shrunk = self.outline.buffer(-self.margin, 2)
@@ -181,6 +188,10 @@ class CombingArea:
             np.hypot(*(self.corners[from_s] - start).T),
             np.hypot(*(self.corners[to_t] - end).T),
         ])
+        # (imported here: most runs comb no travel, and the graph module adds to every start-up)
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import dijkstra
+
         graph = coo_matrix((np.maximum(weights, 1e-9), (rows, cols)), shape=(n + 2, n + 2)).tocsr()
         dist, previous = dijkstra(graph, directed=True, indices=s, return_predecessors=True)
         if not np.isfinite(dist[t]):

@@ -22,7 +22,8 @@ from DelaunayInfill.gcode import ProcessSettings, process_gcode
 from DelaunayInfill.gcode.area import skin_region, wall_rings
 from DelaunayInfill.gcode.footer import read_footer
 from DelaunayInfill.gcode.read import as_cura_list
-from DelaunayInfill.gcode.witness import kept_cura_pieces, witnessed
+from DelaunayInfill.gcode.infer import _quantile
+from DelaunayInfill.gcode.witness import _all_near, _near, _polylines, kd_tree, kept_cura_pieces, witnessed
 
 LW = 0.4
 E_PER_MM = 0.0333
@@ -154,6 +155,48 @@ def test_witnessed_keeps_only_what_cura_lines_confirm():
     assert out.intersection(island).area == 0.0  # no Cura line in it
     assert out.intersection(box(0, 30, 40, 40)).area == 0.0  # farther than 4 mm from every line
     assert out.intersection(box(2, 2, 38, 18)).area > 0.99 * 36 * 16
+
+
+def test_witnessed_takes_segments_as_well_as_runs():
+    area = box(0, 0, 40, 40)
+    runs = [np.array([[1.0, y], [20.0, y], [39.0, y + 0.5]]) for y in np.arange(1.0, 20.0, 4.0)]
+    segments = np.concatenate([np.stack([r[:-1], r[1:]], axis=1) for r in runs])
+    assert witnessed(area, segments, LW, 4.0).equals(witnessed(area, runs, LW, 4.0))
+    assert [r.tolist() for r in _polylines(segments)] == [r.tolist() for r in runs]
+
+
+def test_grouped_reach_queries_answer_as_one_query_per_point():
+    """`_all_near` and `_near` answer groups of points at once: the same answers as querying each point."""
+    rng = np.random.default_rng(3)
+    lines = np.concatenate([np.c_[np.linspace(0, 30, 80), np.full(80, y)] for y in (2.0, 9.0, 17.0, 29.0)])
+    tree = kd_tree(lines)
+    for limit in (1.0, 3.0, 6.0, 9.0):
+        points = rng.uniform(-2, 32, (500, 2))
+        group = np.arange(len(points)) // 7
+        exact = bool((tree.query(points)[0] <= limit).all())
+        assert _all_near(tree, points, group, limit) == exact
+        near_ones = points[tree.query(points)[0] <= limit]
+        assert _all_near(tree, near_ones, np.arange(len(near_ones)) // 5, limit)
+    # Cura's segments stepped at half a line width, as kept_cura_pieces asks
+    cura = np.array([[[0.0, 5.0], [30.0, 5.0]], [[0.0, 25.0], [30.0, 25.0]], [[5.0, -10.0], [5.0, 40.0]]])
+    d = cura[:, 1] - cura[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    n = np.ceil(length / (LW / 2)).astype(np.int64)
+    seg = np.repeat(np.arange(len(cura)), n)
+    k = np.arange(seg.size) - (np.cumsum(n) - n)[seg]
+    mid = cura[seg, 0] + d[seg] * ((k + 0.5) / n[seg])[:, None]
+    rows = np.flatnonzero(rng.uniform(size=len(mid)) < 0.9)
+    for reach in (0.5, 2.0, 5.0):
+        expected = tree.query(mid[rows])[0] <= reach
+        assert (_near(tree, mid, rows, reach, (seg, k, length / n)) == expected).all()
+
+
+def test_quantile_is_numpy_s():
+    rng = np.random.default_rng(4)
+    for size in (1, 2, 3, 10, 57):
+        values = rng.uniform(0, 5, size)
+        for q in (0.0, 0.1, 0.5, 0.9, 1.0):
+            assert _quantile(values, q) == float(np.quantile(values, q))
 
 
 def test_kept_cura_pieces_where_no_new_line_takes_over():

@@ -160,10 +160,21 @@ class LayerRecord:
     z_start: float
     end: MachineState
     layer_z: float
-    blocks: list[BlockEdit]
     time_lines: list[int]
     retraction_after: RetractionModel
     extra: dict = field(default_factory=dict)
+    # (text, edits) until the first repeat asks for the blocks (`ready`): most layers of a model whose
+    # sections change are never repeated, and building the blocks' templates costs about a millisecond
+    pending: tuple | None = None
+    blocks: list[BlockEdit] | None = None
+
+    def ready(self) -> bool:
+        """Build the new blocks' templates (once); False when `render` would not write them as they were."""
+        if self.pending is not None:
+            text, edits = self.pending
+            self.pending = None
+            self.blocks = _block_edits(text, self.values, self.is_e, self.relative_e, self.e_start, edits)
+        return self.blocks is not None
 
 
 class RepeatCache:
@@ -245,15 +256,30 @@ def record_layer(
         return None  # a mode change: E words would not all be registers (or all deltas)
     relative = end.relative_e
     e_values = words.values[words.is_e]
-    e_list = e_values.tolist()
     z_values = words.values[~words.is_e]
     # The words must be what the parse saw: the last E and Z words set the state after the layer.
     if not relative and (e_values[-1] if len(e_values) else state_before.e) != end.e:
         return None
     if (z_values[-1] if len(z_values) else state_before.z) != end.z:
         return None
-    if len(e_values) and not relative and edits:
+    del lines  # (the blocks are found in `text` itself when a repeat asks for them)
+    return LayerRecord(words.values, words.is_e, relative, state_before.e, state_before.z, end.copy(), layer_z,
+                       list(time_lines), retraction_after, pending=(text, list(edits)) if edits else None,
+                       blocks=None if edits else [])
+
+
+def _block_edits(text: str, values: np.ndarray, is_e: np.ndarray, relative: bool, e_start: float,
+                 edits: list[tuple[int, int, list[str], MachineState, MachineState]]) -> list[BlockEdit] | None:
+    """The recorded layer's new blocks as `BlockEdit` templates (None: one would not be rewritten exactly).
+
+    `values`/`is_e` the layer's words (`LayerWords`), `e_start` the E register before it, `edits` as
+    for `record_layer`.
+    """
+    e_values = values[is_e]
+    e_list = e_values.tolist()
+    if len(e_values) and not relative:
         # where each line starts, and where each E word is, in characters
+        lines = text.split("\n")
         line_start = np.zeros(len(lines) + 1, dtype=np.int64)
         np.cumsum([len(line) + 1 for line in lines], out=line_start[1:])
         e_offsets = np.array([m.start(1) for m in _WORD.finditer(text) if m.group(1)[0] == "E"], dtype=np.int64)
@@ -266,9 +292,9 @@ def record_layer(
         else:
             e_before_count = int(np.searchsorted(e_offsets, line_start[start])) if len(e_values) else 0
             e_after_count = int(np.searchsorted(e_offsets, line_start[stop])) if len(e_values) else 0
-            if _register_at(e_list, e_before_count, state_before.e) != before.e:
+            if _register_at(e_list, e_before_count, e_start) != before.e:
                 return None
-            if _register_at(e_list, e_after_count, state_before.e) != after.e:
+            if _register_at(e_list, e_after_count, e_start) != after.e:
                 return None
         edit = BlockEdit(start, stop, new_lines, before.e, e_before_count, e_after_count)
         if relative and edit.g92_count:
@@ -276,8 +302,7 @@ def record_layer(
         if not edit.empty and edit.render(0, 0.0, after.e) != "\n".join(new_lines):
             return None  # written in a way `render` does not reproduce
         blocks.append(edit)
-    return LayerRecord(words.values, words.is_e, relative, state_before.e, state_before.z, end.copy(), layer_z,
-                       blocks, list(time_lines), retraction_after)
+    return blocks
 
 
 def replay_layer(
@@ -289,6 +314,8 @@ def replay_layer(
     (s) is added to its ``;TIME_ELAPSED:`` lines (the layer's own change included).
     """
     if len(words.values) != len(record.values) or state_before.relative_e != record.relative_e:
+        return None
+    if not record.ready():
         return None
     is_e = record.is_e
     diff = words.values - record.values

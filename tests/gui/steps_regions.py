@@ -432,10 +432,13 @@ def edit_shape_and_undo(ctx, name: str, shape: str, size: float):
 def record_sizes(ctx, model: str, key: str):
     """Record the size Cura reports: the scene's (under the object list), the model's box, the Scale tool's.
 
-    Cura recomputes the scene's size 100 ms after a change; the step waits for it to settle.
+    Cura recomputes the scene's size 100 ms after a change (a timer: on a busy machine later, so the
+    step waits until Cura shows a size at all); then it waits a moment more for it to settle.
     """
     from UM.Scene.Selection import Selection
 
+    yield ctx.wait_until(lambda: not str(ctx.app.getSceneBoundingBoxString).startswith("0.0 x 0.0 x 0.0"), 30,
+                         "Cura's scene size under the object list")
     yield 1.0
     node = ctx.node(model)
     box = node.getBoundingBox()

@@ -31,7 +31,7 @@ from scipy.spatial import QhullError, cKDTree
 
 from .decomposition import decompose_convex
 from .density import KAPPA, DensityMap, ZoneRaster, check_line_width, paper_radius
-from .geometry import as_area, boundary_segments, box, contains_xy, polygons_of, to_multipolygon, unary_union
+from .geometry import as_area, boundary_segments, contains_xy, polygons_of, to_multipolygon, unary_union
 from .routing import chain_segments, clip_segments, odd_vertex_count, order_paths, split_segments
 from .sampling import sample_lattice, sample_poisson_disk, sample_triangulated
 from .triangulation import (
@@ -42,6 +42,7 @@ from .triangulation import (
     lop_violations,
     relax_points,
     triangle_angles,
+    uncrowded_edges,
     unique_edges,
 )
 
@@ -50,7 +51,7 @@ __all__ = ["InfillPattern", "InfillResult", "generate_infill", "segment_length"]
 LAYOUTS = ("seamless", "paper")
 CALIBRATIONS = ("measured", "paper")
 _TOLERANCE = 0.0015  # calibration stops within 0.15 percentage points
-_PRINTED_TOLERANCE = 0.005  # paper layout calibrated on its clipped lines (`InfillPattern.build`'s inset)
+_PRINTED_TOLERANCE = 0.005  # paper layout calibrated on its clipped lines (`InfillPattern.build`'s infill_area)
 _MAX_ITERATIONS = 8
 _LOOP_TOLERANCE = 0.003  # several zones: the loop stops within 0.3 points (balancing does the rest)
 _SLIVER = 1.5  # hull triangles with a circumradius above 1.5 r are not part of the pattern
@@ -58,10 +59,9 @@ _COARSE = 36.0  # several zones: a zone under this many squared radii is only ba
 _THIN = 1.4  # zone interiors: a zone of mean width under this many line widths is kept whole
 _FEW = 48  # zone meter: up to this many pieces to cut query the edges' tree (no tree of their own)
 _CELL = 0.45  # several sharp-border zones: raster cell side, in line widths
-_OUTLINE = 2.0  # ... zone interiors leave out this many widths along the footprint's outline
-_KEEP_OUTLINE = 0.7  # ... where a zone keeps this share of its cells (else only the band along others)
 _MAX_CELLS = 120_000  # ... the cell grows beyond that when the footprint's box would need more cells
 _FEW_CELLS = 400  # ... cells wider than a line: a zone of fewer cells is measured exactly instead
+_LATTICE_SIDE = 2.0 * math.sqrt(3.0)  # triangular lattice of density d: side 2 sqrt(3) w / d
 
 
 def segment_length(segments: np.ndarray) -> float:
@@ -254,13 +254,10 @@ class _RasterMeter:
         Labels 0 .. zones - 1 (-1: in no zone): where lengths and areas are measured.
     zones : int
         Number of zones.
-    inner : ZoneRaster, optional
-        Where `contains` finds points (refinement inserts there); default `raster`.
     """
 
-    def __init__(self, raster: ZoneRaster, zones: int, inner: ZoneRaster | None = None):
+    def __init__(self, raster: ZoneRaster, zones: int):
         self.raster = raster
-        self.inner = raster if inner is None else inner
         self.count = zones
         self.areas = raster.counts(zones) * raster.cell**2  # (zones,) mm^2
         labelled = raster.labels >= 0
@@ -299,7 +296,7 @@ class _RasterMeter:
 
     def contains(self, k: int, xy: np.ndarray) -> np.ndarray:
         """Indices of the points (m, 2) inside zone k (of `inner`), shape (h,) ascending."""
-        return np.flatnonzero(self.inner.at(xy) == k)
+        return np.flatnonzero(self.raster.at(xy) == k)
 
     def densities_of(self, inside: np.ndarray, width: float) -> np.ndarray:
         """Measured density per zone from `inside_all`'s lengths (zones, m) (NaN where a zone has no area)."""
@@ -381,11 +378,9 @@ class InfillPattern:
     line_width : float
     layout, calibration : str
     calibrated_densities : list of float
-        Measured density per zone of the footprint after calibration (away
-        from borders between zones: `_zone_interiors`; with several
-        sharp-border zones on a raster of the zones, also away from the
-        footprint's outline where a zone keeps most of itself:
-        `_raster_interiors`).
+        Measured density per zone after calibration: each zone whole, the
+        bands along other zones included, inside the infill area (`build`'s
+        `infill_area`); with a feather, the zone cores (`_zone_interiors`).
     """
 
     segments: np.ndarray
@@ -414,7 +409,7 @@ class InfillPattern:
         relax: int = 0,
         feather: float = 0.0,
         sampler: str | None = None,
-        inset: float = 0.0,
+        infill_area=None,
     ) -> InfillPattern:
         """Sample, triangulate and calibrate a pattern for `footprint`.
 
@@ -434,8 +429,8 @@ class InfillPattern:
             ``measured``: one zone is sampled at the radius of
             ``KAPPA * line_width / density`` (Newton steps if far off), then
             the pattern is scaled to within about 0.04 points of the target;
-            several zones are re-sampled until each (away from its borders
-            with other zones) is within 0.3 points of its target or two
+            several zones are re-sampled until each (whole, its border bands
+            included) is within 0.3 points of its target or two
             samplings bring nothing better, then the zones still off by more
             than 0.15 points are balanced by single edges;
             ``paper``: Formula (6).
@@ -451,12 +446,12 @@ class InfillPattern:
             (equilateral triangles: the stiffest line network per density,
             the same in every direction), Poisson-disk samples elsewhere;
             ``fast``: Poisson-disk samples everywhere.
-        inset : float
-            Paper layout: how far inside the footprint the infill area lies, mm
-            (the G-code pass builds on the area grown by a line width).  The
-            lines will be printed half a line width further in, so each convex
-            part is calibrated on its lines there, against its part of the
-            infill area.
+        infill_area : shapely (Multi)Polygon, optional
+            Where the lines will be printed (a layer's infill area, inside the
+            footprint; the G-code pass builds on it grown by a line width, and
+            over a growing mesh's whole extent): calibration measures the lines
+            there, each zone whole, the paper layout each convex part against
+            its part of it.  Default: the footprint.
 
         Raises
         ------
@@ -474,23 +469,29 @@ class InfillPattern:
         if relax < 0:
             raise ValueError(f"relax steps must be >= 0, got {relax}")
         sampler = sampler or ("bridson" if layout == "paper" else "lattice")
+        printed = area if infill_area is None else to_multipolygon(as_area(infill_area, what="infill area").intersection(area))
+        printed = printed if printed.area > 0 else area
         if layout == "seamless":
-            return cls._build_seamless(area, dmap, width, int(seed), calibration, relax, sampler)
-        return cls._build_paper(area, dmap, width, int(seed), calibration, relax, sampler, max(0.0, float(inset)))
+            return cls._build_seamless(area, dmap, width, int(seed), calibration, relax, sampler, printed)
+        return cls._build_paper(area, dmap, width, int(seed), calibration, relax, sampler, printed)
 
     @classmethod
-    def _build_seamless(cls, area, dmap, width, seed, calibration, relax, sampler):
+    def _build_seamless(cls, area, dmap, width, seed, calibration, relax, sampler, printed):
         if sampler == "lattice" and dmap.feather > 0:
             # A feathered border varies the radius over a band the lattices leave to the Poisson-disk
             # samples (measured there, `fast` keeps the blend closer to the map): `fast` throughout.
             sampler = "fast"
-        meter = _raster_meter(area, dmap, width) if dmap.feather <= 0 and dmap.regions else None
+        # Measured where the lines are printed (a lattice a few sides across a small part prints a ring
+        # round it that the infill area has not; a mesh's extent holds places it never prints).
+        meter = _raster_meter(printed, dmap, width) if dmap.feather <= 0 and dmap.regions else None
         if meter is None:
-            zones = dmap.zones(area)
+            zones = dmap.zones(printed)
             if dmap.feather > 0:  # calibrate the zone cores, not the blend bands between them
                 cores = [to_multipolygon(z.buffer(-0.5 * dmap.feather)) for z in zones]
                 zones = [core if core.area > 0 else z for core, z in zip(cores, zones)]
-            meter = _ZoneMeter(_zone_interiors(zones, width, None if dmap.feather > 0 else area))
+            # Whole zones, border bands included: what a region prints is what it is asked for.  (A
+            # feathered map calibrates the zone cores without a band: the blend between them is the map's.)
+            meter = _ZoneMeter(_zone_interiors(zones, width) if dmap.feather > 0 else zones)
         zone_areas = meter.areas
         targets = np.array(dmap.densities)
         lowest = float(min(targets))
@@ -542,6 +543,8 @@ class InfillPattern:
             triangles = delaunay_triangles(points) if growing is None else growing.add(np.zeros((0, 2)))
             triangles = _drop_slivers(points, triangles, radius_fn)
             edges = unique_edges(triangles)
+            # crowded nodes thinned before measuring: the calibration makes up for what they lose
+            edges = edges[uncrowded_edges(points[edges], _shortest_edges(points[edges], dmap, width))]
             segments = points[edges]
             inside = meter.inside_all(segments)
             measured = meter.densities_of(inside, width)
@@ -591,12 +594,17 @@ class InfillPattern:
             off = small | (settled & np.isfinite(measured) & (np.abs(measured - targets) > _TOLERANCE))
             # The edges' inside lengths are known already: balancing measures only new edges.
             known = {"keys": _edge_keys(edges), "values": inside}
-            points, triangles, segments, measured = _balance_zones(points, triangles, meter, targets, width, off,
-                                                                   known=known, growing=growing)
+            points, triangles, segments, measured = _balance_zones(
+                points, triangles, meter, targets, width, off, known=known, growing=growing,
+                limit=lambda segs: uncrowded_edges(segs, _shortest_edges(segs, dmap, width)))
+        keep = uncrowded_edges(segments, _shortest_edges(segments, dmap, width))
+        if not keep.all():
+            segments = segments[keep]
+            measured = meter.densities_of(meter.inside_all(segments), width)
         return cls(segments, points, triangles, area, dmap, width, "seamless", calibration, list(measured), iteration)
 
     @classmethod
-    def _build_paper(cls, area, dmap, width, seed, calibration, relax, sampler, inset=0.0):
+    def _build_paper(cls, area, dmap, width, seed, calibration, relax, sampler, printed_area):
         parts = []
         for zone_index, zone in enumerate(dmap.zones(area)):
             for polygon in polygons_of(zone):
@@ -604,23 +612,20 @@ class InfillPattern:
                     continue  # a sliver between zones: no line fits in it
                 parts.extend((convex, zone_index) for convex in decompose_convex(polygon))
         targets = dmap.densities
-        if inset > 0:
-            infill = area.buffer(-inset)
-            printed_area = area.buffer(-(inset + width / 2))
         all_points, all_triangles, all_segments = [], [], []
         offset = 0
         for part_index, (part, zone_index) in enumerate(parts):
             target = targets[zone_index]
             radius = paper_radius(target, width) if calibration == "paper" else KAPPA * width / target
-            # what will be printed of the part: its lines half a line width inside the infill area
+            # what will be printed of the part: its lines inside the infill area, to its edge as Cura's
             # (the footprint's own border shrunk, not the borders between its parts)
-            kept = to_multipolygon(part.intersection(printed_area)) if inset > 0 else None
-            infill_area = part.intersection(infill).area if inset > 0 else part.area
+            kept = None if printed_area is area else to_multipolygon(part.intersection(printed_area))
+            infill_area = part.area if kept is None else kept.area
             # (clipped lines come and go with the samples: half a point is as close as a resampling gets)
             tolerance = _TOLERANCE if kept is None else max(_TOLERANCE, _PRINTED_TOLERANCE)
             best = None
-            # a part a few samples across is as dense as its samples fall: two tries, the closer kept
-            tries = _MAX_ITERATIONS if part.area > 30.0 * radius * radius else 2
+            # a part a few samples across is as dense as its samples fall: four tries, the closest kept
+            tries = _MAX_ITERATIONS if part.area > 30.0 * radius * radius else 4
             for _ in range(tries if calibration == "measured" else 1):
                 points = sample_poisson_disk(part, radius, seed=seed + part_index, method=sampler)
                 if relax:
@@ -643,6 +648,7 @@ class InfillPattern:
         points = np.concatenate(all_points) if all_points else np.zeros((0, 2))
         triangles = np.concatenate(all_triangles) if all_triangles else np.zeros((0, 3), np.intp)
         segments = np.concatenate(all_segments) if all_segments else np.zeros((0, 2, 2))
+        segments = segments[uncrowded_edges(segments, _shortest_edges(segments, dmap, width))]
         measured = [measured_density(segments, z, width) for z in dmap.zones(area)]
         return cls(segments, points, triangles, area, dmap, width, "paper", calibration, measured)
 
@@ -696,9 +702,11 @@ class InfillPattern:
 
 
 def _raster_meter(area, dmap: DensityMap, width: float):
-    """A `_RasterMeter` of the zone interiors of a sharp-border density map over `area`.
+    """A `_RasterMeter` of the zones of a sharp-border density map over `area`.
 
-    The cell is `_CELL` line widths, larger when the footprint's box would
+    The zones are measured whole inside `area` (the infill area), border
+    bands included: a region prints its density over all of itself, the
+    band where the pattern changes included.  The cell is `_CELL` line widths, larger when the footprint's box would
     need more than `_MAX_CELLS` cells.  None (measure exactly, `_ZoneMeter`)
     when fewer than two zones have cells (a single zone is calibrated to a
     tighter tolerance), or when the cell grew wider than a line and a zone
@@ -714,124 +722,19 @@ def _raster_meter(area, dmap: DensityMap, width: float):
     present = counts[counts > 0]
     if present.size < 2 or (cell > width and present.min() < _FEW_CELLS):
         return None  # one zone; or a zone of a few cells wider than a line (a large part): exact
-    measured, inner = _raster_interiors(raster, zones, width, _OUTLINE * width)
-    return _RasterMeter(measured, zones, inner)
+    return _RasterMeter(raster, zones)
 
 
-def _raster_interiors(raster: ZoneRaster, zones: int, width: float, outline: float = 0.0) -> tuple[ZoneRaster, ZoneRaster]:
-    """`_zone_interiors` on a raster: each zone without the cells within a line width of another zone.
-
-    Also without the cells within `outline` of the area's outline (the zones
-    are then calibrated on what a layer's report measures: the pattern's
-    footprint is the layers' infill area grown by a width, and the report
-    leaves out a width along the layer's outline) where the zone keeps 70 %
-    of its cells; a zone mostly along the outline (too few cells left to
-    measure) loses only the band along other zones.  A zone that would keep under 30 % of its cells even
-    so is kept whole (a strip narrower than about 1.4 widths along one
-    border, or swallowed by bands on both sides; cutting cells is cheap, so
-    no separate rule for narrow zones is needed).
-
-    Parameters
-    ----------
-    raster : ZoneRaster
-        Zone labels 0 .. zones - 1 (-1: outside the area).
-    zones : int
-    width : float
-        Line width, mm.
-    outline : float
-        Band along the area's outline, mm (0: none).
-
-    Returns
-    -------
-    (ZoneRaster, ZoneRaster)
-        The interiors (band cells -1); and the zones without the band along
-        other zones only (the 30 % rule alone).
-    """
-    labels, cell = raster.labels, raster.cell
-    ny, nx = labels.shape
-    # A cell is in the band when its centre is within `reach` of the centre of a border cell
-    # (those on this side lie about half a cell inside the border).
-    reach = [max(band - 0.5 * cell, 0.0) / cell for band in (width, outline)]
-    pad = max(1, math.floor(max(reach)))
-    # Flat, framed by `pad` cells of -1 (rows above and below, columns after each row, also
-    # before the next row's first cell): an offset within the band's reach never wraps round.
-    row = nx + pad
-    framed = np.full((ny + 2 * pad, row), -1, dtype=labels.dtype)
-    framed[pad:-pad, :nx] = labels
-    flat = framed.ravel()
-    borders = ([], [])  # cells next to a cell of another zone; cells next to the outside
-    for step in (1, row):
-        here = np.flatnonzero(flat[step:] != flat[:-step])
-        there = here + step
-        a, b = flat[here], flat[there]
-        between = (a >= 0) & (b >= 0)
-        borders[0].extend((here[between], there[between]))
-        borders[1].extend((here[(a >= 0) & (b < 0)], there[(a < 0) & (b >= 0)]))
-    counts = raster.counts(zones)
-    kept = counts.copy()
-    bands = []  # (cells, their labels, cells each zone loses): along other zones; along both
-    in_band = np.zeros(flat.size, dtype=bool)
-    for border, band, r in zip(borders, (width, outline), reach):
-        border = np.concatenate(border)
-        if border.size and band > 0:
-            seeds = np.zeros(flat.size, dtype=bool)
-            seeds[border] = True
-            in_band |= _dilate(seeds, r, row)
-        cells = np.flatnonzero(in_band)
-        label = flat[cells].astype(np.intp)
-        bands.append((cells, label, np.bincount(label + 1, minlength=zones + 1)[1:]))
-    # Both bands where the zone keeps 70 % of its cells; else the band along other zones where it
-    # keeps 30 % (a small zone is measured on too few cells otherwise); else the whole zone.
-    apart = (counts > 0) & (counts - bands[0][2] >= 0.3 * counts)  # the band along other zones only
-    both = (counts > 0) & (counts - bands[1][2] >= _KEEP_OUTLINE * counts)
-    inner = framed.copy()  # the band along other zones only: where refinement inserts
-    cells, label, lost = bands[0]
-    inner.ravel()[cells[np.append(apart, False)[label]]] = -1  # (label -1: nothing to cut)
-    inner = ZoneRaster(inner[pad:-pad, :nx], raster.x0, raster.y0, cell, [counts - np.where(apart, lost, 0)])
-    for (cells, label, lost), cut in zip(bands, (apart & ~both, both)):
-        if cut.any():
-            flat[cells[np.append(cut, False)[label]]] = -1
-            kept -= np.where(cut, lost, 0)
-    return ZoneRaster(framed[pad:-pad, :nx], raster.x0, raster.y0, cell, [kept]), inner
-
-
-def _dilate(mask: np.ndarray, reach: float, row: int) -> np.ndarray:
-    """Cells (flat bool mask of rows of `row` cells) within `reach` cells of a cell of `mask`.
-
-    The disk is taken row by row: the mask widened along the rows by each
-    half-width the disk has, then moved up and down to the rows where the
-    disk is that wide (about 4 x reach whole-array operations).  Cells within
-    `reach` of the mask's first and last rows and columns must be frame
-    (nothing wraps round).
-    """
-    r = math.floor(reach + 1e-9)
-    widened = [mask]
-    for dx in range(1, r + 1):
-        wider = widened[-1].copy()
-        wider[dx:] |= mask[:-dx]
-        wider[:-dx] |= mask[dx:]
-        widened.append(wider)
-    out = widened[r].copy()
-    for dy in range(1, r + 1):
-        half = widened[math.floor(math.sqrt(max(reach * reach - dy * dy, 0.0)) + 1e-9)]
-        step = dy * row
-        out[step:] |= half[:-step]
-        out[:-step] |= half[step:]
-    return out
-
-
-def _zone_interiors(zones: list, width: float, tiled=None) -> list:
+def _zone_interiors(zones: list, width: float) -> list:
     """Zones without a band of one line width along their borders with other zones.
 
     Across a border between two densities the pattern changes over a few
-    samples; the band where it does belongs to neither zone, so each zone is
-    calibrated on the rest (as a region's density is measured: away from its
-    border, where lines on the border do not count twice).  Borders with the
+    samples; with a feather the band where it does is the map's blend, so each
+    zone's core is calibrated on the rest.  Borders with the
     footprint's outline are kept; a zone that the band would (nearly) swallow
     is kept whole, as is a zone narrower on average than 1.4 widths (twice
     its area over its perimeter: a strip that narrow loses over 70 % to a
-    band along one side).  `tiled`: the area the zones tile, when they do (the
-    others are then its difference with a zone).
+    band along one side).
     """
     present = [k for k, z in enumerate(zones) if z.area > 0]
     if len(present) < 2:
@@ -843,14 +746,7 @@ def _zone_interiors(zones: list, width: float, tiled=None) -> list:
         # regions have long ragged outlines that are costly to cut).
         if 2.0 * zone.area < _THIN * width * zone.length:
             continue
-        if tiled is not None:
-            # Only the others within a width of the zone matter: the tiled area is cut to the
-            # zone's box grown by two widths first (the band is the same, its making cheaper).
-            x0, y0, x1, y1 = zone.bounds
-            grow = 2.0 * width
-            others = tiled.intersection(box(x0 - grow, y0 - grow, x1 + grow, y1 + grow)).difference(zone)
-        else:
-            others = unary_union([zones[j] for j in present if j != k])
+        others = unary_union([zones[j] for j in present if j != k])
         inner = to_multipolygon(zone.difference(others.buffer(width, 4)))
         if inner.area >= 0.3 * zone.area:
             out[k] = inner
@@ -913,7 +809,8 @@ def _fine_tune_scale(points, edges, meter, targets, measured, width, limit, area
     return scaled, scaled[edges], measured
 
 
-def _balance_zones(points, triangles, meter, targets, width, small, rounds: int = 12, known=None, growing=None):
+def _balance_zones(points, triangles, meter, targets, width, small, rounds: int = 12, known=None, growing=None,
+                   limit=None):
     """Bring zones that calibration cannot reach to their targets.
 
     A zone smaller than about two of its own radii cannot reach its target in
@@ -930,7 +827,7 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
     `_RasterMeter`) holds the zones and measures them; `known` (see
     `_inside_lengths`) may hold the inside lengths of the triangles' edges
     already; `growing` (`GrowingDelaunay`), a triangulation of `points` to
-    go on from.
+    go on from; `limit`, passed to `_thin_dense_zones`.
 
     Returns
     -------
@@ -940,7 +837,7 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
     # `growing`: qhull's triangulation, points added round by round
     best = None  # (largest shortfall, round, points, triangles, segments, measured) of the best round
     for turn in range(rounds):
-        segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known)
+        segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known, limit)
         short, shortfall = _shortfall(measured, targets, small)
         if best is None or shortfall < best[0]:
             best = (shortfall, turn, points, triangles, segments, measured)
@@ -986,7 +883,7 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
         if triangles is None:
             triangles = delaunay_triangles(points)
     else:
-        segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known)
+        segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known, limit)
         if best is None or _shortfall(measured, targets, small)[1] < best[0]:
             return points, triangles, segments, measured
     _, _, points, triangles, segments, measured = best
@@ -1007,7 +904,7 @@ def _growing_delaunay(points):
         return None
 
 
-def _thin_dense_zones(points, triangles, meter, targets, width, small, known=None):
+def _thin_dense_zones(points, triangles, meter, targets, width, small, known=None, limit=None):
     """Leave out edges in zones that print denser than their target.
 
     A zone smaller than about two of its own radii cannot reach a low target
@@ -1017,7 +914,9 @@ def _thin_dense_zones(points, triangles, meter, targets, width, small, known=Non
     until its printed density is as close to the target as whole edges allow.
 
     `known` caches the edges' inside lengths between calls on the same
-    points (more appended), so only new edges are measured.
+    points (more appended), so only new edges are measured; `limit`
+    (segments (e, 2, 2) -> bool (e,)), the edges kept before any thinning
+    (`uncrowded_edges`).
 
     Returns
     -------
@@ -1041,14 +940,14 @@ def _thin_dense_zones(points, triangles, meter, targets, width, small, known=Non
     owners[edge_of[first], 0] = order[first] // 3
     owners[edge_of[~first], 1] = order[~first] // 3
     segments = points[edges]
-    keep = np.ones(len(edges), dtype=bool)
+    keep = np.ones(len(edges), dtype=bool) if limit is None else limit(segments)  # (crowded nodes thinned first)
     opened = set()  # triangles with an edge left out
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
     # Length of every edge inside every zone: leaving edges out does not change it.
     inside_of = _inside_lengths(edges, segments, meter, {} if known is None else known)
     # Edges at each vertex, kept up to date as edges are left out (plain ints: the walk below
     # is sequential, and plain Python numbers are cheaper there than numpy scalars).
-    degree = np.bincount(edges.ravel(), minlength=n).tolist()
+    degree = np.bincount(edges[keep].ravel(), minlength=n).tolist()
     for k, (zone_area, target, thin) in enumerate(zip(meter.areas.tolist(), targets, small)):
         if not thin or zone_area <= 0:
             continue
@@ -1109,6 +1008,18 @@ def _inside_lengths(edges, segments, meter, known: dict) -> np.ndarray:
 def _edge_keys(edges: np.ndarray) -> np.ndarray:
     """One int64 per edge (e, 2) of vertex indices, ordered as the rows are (lexicographically)."""
     return edges[:, 0].astype(np.int64) * (1 << 32) + edges[:, 1]
+
+
+def _shortest_edges(segments: np.ndarray, dmap: DensityMap, width: float) -> np.ndarray:
+    """A quarter of the local spacing (the lattice side at the wanted density) per segment (k, 2, 2), mm.
+
+    Across a border the denser side's spacing (the densest of the two ends and the middle).
+    """
+    if len(segments) == 0:
+        return np.zeros(0)
+    at = np.concatenate((segments[:, 0], segments[:, 1], segments.mean(axis=1)))
+    densest = dmap.at(at).reshape(3, -1).max(axis=0)
+    return 0.25 * _LATTICE_SIDE * width / densest
 
 
 def _drop_slivers(points: np.ndarray, triangles: np.ndarray, radius_fn) -> np.ndarray:

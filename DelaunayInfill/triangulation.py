@@ -22,6 +22,8 @@ __all__ = [
     "triangle_angles",
     "edge_length_stats",
     "relax_points",
+    "node_edge_counts",
+    "uncrowded_edges",
 ]
 
 
@@ -216,6 +218,98 @@ def edge_length_stats(segments: np.ndarray) -> dict:
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
     mean = float(length.mean())
     return {"mean_mm": mean, "short_share": float(np.mean(length < 0.5 * mean))}
+
+
+def node_edge_counts(segments: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The nodes of a segment network and how many segments meet at each.
+
+    Parameters
+    ----------
+    segments : ndarray, shape (k, 2, 2)
+        Segments whose shared ends are the same floats (as edges taken from one point array are).
+
+    Returns
+    -------
+    (nodes, ends, counts)
+        `nodes` (n, 2) the distinct end points, `ends` (k, 2) each segment's node indices,
+        `counts` (n,) segments per node.
+    """
+    flat = np.ascontiguousarray(np.asarray(segments, dtype=float).reshape(-1, 2))
+    if len(flat) == 0:
+        return np.zeros((0, 2)), np.zeros((0, 2), np.intp), np.zeros(0, np.intp)
+    nodes, inverse = np.unique(flat, axis=0, return_inverse=True)
+    ends = inverse.reshape(-1, 2)
+    return nodes, ends, np.bincount(ends.ravel(), minlength=len(nodes))
+
+
+def uncrowded_edges(segments: np.ndarray, shortest: np.ndarray | float = 0.0, *, max_edges: int = 8,
+                    min_edges: int = 3) -> np.ndarray:
+    """Which segments to keep so that no node has more than `max_edges` and none is too short.
+
+    Where a point ends up among closer neighbours than the sampling radius
+    (a refinement centre, a sample in the band between two lattices) it
+    gathers up to a dozen edges: a lump of plastic and short, weak pieces.
+    At such a node an edge is left out, one at a time, until it has
+    `max_edges`: the shortest of those whose leaving out opens a gap (the
+    two angles beside it added) of at most a quarter turn, else the one that
+    opens the smallest gap; then every edge shorter than `shortest` is left
+    out.  An
+    edge is left out only while both its nodes keep `min_edges` (the cells
+    beside it merge into one polygon; the network stays connected).
+
+    Parameters
+    ----------
+    segments : ndarray, shape (k, 2, 2)
+        The network, mm; shared ends are the same floats.
+    shortest : float or ndarray, shape (k,)
+        Shortest length kept per segment, mm (0: no length limit).
+    max_edges, min_edges : int
+
+    Returns
+    -------
+    ndarray of bool, shape (k,)
+    """
+    segments = np.asarray(segments, dtype=float)
+    keep = np.ones(len(segments), dtype=bool)
+    if len(segments) == 0:
+        return keep
+    nodes, ends, counts = node_edge_counts(segments)
+    length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
+    too_short = np.flatnonzero(length < np.broadcast_to(np.asarray(shortest, dtype=float), length.shape))
+    crowded = np.flatnonzero(counts > max_edges)
+    if crowded.size == 0 and too_short.size == 0:
+        return keep
+    counts = counts.copy()
+    # (a few nodes and edges per pattern: plain loops over them)
+    for node in crowded.tolist():
+        while counts[node] > max_edges:
+            mine = np.flatnonzero(keep & ((ends[:, 0] == node) | (ends[:, 1] == node)))
+            other = np.where(ends[mine, 0] == node, ends[mine, 1], ends[mine, 0])
+            d = nodes[other] - nodes[node]
+            order = np.argsort(np.arctan2(d[:, 1], d[:, 0]))
+            mine, other = mine[order], other[order]
+            angle = np.arctan2(d[order, 1], d[order, 0])
+            gap = np.diff(np.append(angle, angle[0] + 2 * np.pi))  # gap after each edge
+            closed = gap + np.roll(gap, 1)  # the gap that leaving an edge out opens
+            closed[counts[other] <= min_edges] = np.inf
+            if not np.isfinite(closed).any():
+                break
+            # The shortest of the edges whose leaving out opens no gap wider than a quarter turn (it
+            # prints the least: on a node between two densities, an edge into the denser side); else
+            # the edge that opens the smallest gap.
+            length_here = np.hypot(*d[order].T)
+            fine = np.flatnonzero(closed <= 0.5 * np.pi)
+            pick = int(fine[np.argmin(length_here[fine])]) if fine.size else int(np.argmin(closed))
+            keep[mine[pick]] = False
+            counts[node] -= 1
+            counts[other[pick]] -= 1
+    for edge in too_short[np.argsort(length[too_short])].tolist():
+        a, b = ends[edge]
+        if keep[edge] and counts[a] > min_edges and counts[b] > min_edges:
+            keep[edge] = False
+            counts[a] -= 1
+            counts[b] -= 1
+    return keep
 
 
 def relax_points(points: np.ndarray, area, radius_fn, steps: int, *, seed: int = 0, fixed: int = 0) -> np.ndarray:

@@ -221,7 +221,9 @@ def test_infill_mesh_blocks_never_keep_cura_s_infill_on_top_of_the_new(bracket, 
 
 # ----------------------------------------------------------------------------- 3. feather
 def test_feather_reaches_the_engine_and_the_pattern_cache_key(star):
-    square = box(95, 95, 125, 125)
+    # inside the star's inner pentagon (radius 13.5 mm round 110, 110), rings 2.5 mm round it too: the
+    # rings then measure the pattern, not how much of them lies between the star's tips
+    square = box(103, 103, 117, 117)
     regions = [Region(0.6, polygon=square, name="square")]
     sharp, _ = process_gcode(star, ProcessSettings(seed=1), regions=regions)
     soft, report = process_gcode(star, ProcessSettings(seed=1, feather=6.0), regions=regions)

@@ -493,20 +493,22 @@ def test_zones_later_regions_win_and_a_tiled_area_has_no_base_zone():
     from DelaunayInfill.gcode.process import _Run
 
     lw = 0.4
-    inner = (10 - 2 * lw) * (10 - 2 * lw)  # a 10 x 10 mm square less a band of one line width
     area = box(0, 0, 20, 10)
+    # whole zones (the report measures them, border bands included, as the pattern is calibrated)
     cases = [
-        ([(box(0, 0, 10, 10), 0.3, "a"), (box(10, 0, 20, 10), 0.1, "b")], [inner, inner, 0.0]),
-        ([(box(0, 0, 12, 10), 0.3, "a"), (box(10, 0, 20, 10), 0.1, "b")], [inner, inner, 0.0]),  # b wins 10..12
-        ([(box(-5, -5, 25, 15), 0.3, "a")], [(20 - 2 * lw) * (10 - 2 * lw), 0.0]),  # one region covers it all
-        ([(box(0, 0, 10, 10), 0.3, "a")], [inner, inner]),  # the base: the other half
-        ([], [(20 - 2 * lw) * (10 - 2 * lw)]),
+        ([(box(0, 0, 10, 10), 0.3, "a"), (box(10, 0, 20, 10), 0.1, "b")], [100.0, 100.0, 0.0]),
+        ([(box(0, 0, 12, 10), 0.3, "a"), (box(10, 0, 20, 10), 0.1, "b")], [100.0, 100.0, 0.0]),  # b wins 10..12
+        ([(box(-5, -5, 25, 15), 0.3, "a")], [200.0, 0.0]),  # one region covers it all
+        ([(box(0, 0, 10, 10), 0.3, "a")], [100.0, 100.0]),  # the base: the other half
+        ([], [200.0]),
     ]
     for regions, expected in cases:
         zones, areas = _Run._zones(SimpleNamespace(zone_areas={}), area, regions, lw)
         assert len(zones) == len(regions) + 1
         assert areas == pytest.approx(expected, abs=1e-6)
         assert [z.area for z in zones] == areas
+        for (shape, _, _), zone in zip(regions, zones):
+            assert zone.within(shape.buffer(1e-9))
     # A modifier split's parts (disjoint, inside the area) are taken as they are: the same zones.
     parts = [(box(0, 0, 10, 10), 0.3, "a"), (box(10, 0, 14, 10), 0.1, "b")]
     _, general = _Run._zones(SimpleNamespace(zone_areas={}), area, parts, lw)
@@ -609,7 +611,8 @@ def test_a_block_prints_at_the_layers_fill_rate_unless_its_own_differs_beyond_ro
 @pytest.mark.parametrize("density", [0.2, 0.4])
 def test_the_paper_layout_prints_its_density_and_fails_no_layer(star, density):
     """The paper's pipeline (convex parts filled one by one) is calibrated on what it prints: its lines
-    half a line width inside the infill area (issue 15: within 2 points; it printed 18.8 / 36.7 %)."""
+    up to the infill area's edge, measured over the whole area (issue 15: within 2 points; it printed
+    18.8 / 36.7 %)."""
     _, report = process_gcode(star, ProcessSettings(layout="paper", density=density))
     assert not report.failed_layers
     (base,) = report.regions
@@ -619,8 +622,9 @@ def test_the_paper_layout_prints_its_density_and_fails_no_layer(star, density):
 def test_the_paper_layout_decomposes_the_h_bracket_with_its_modifier(bracket):
     """Every layer of the H-bracket with a box modifier used to fail (no diagonal at a reflex vertex of
     the modifier's cut: each one touched the border); the cut along a reflex vertex's edge does it.
-    Its many small convex parts print as densely as their few samples fall: 18-25 % over seeds 0-3."""
+    Its many small convex parts, four samplings each, the closest kept: 18.0-19.8 % over seeds 0-3 (the
+    60 % box 57.3-61.0 %); two samplings each printed 18-25 %."""
     _, report = process_gcode(bracket, ProcessSettings(layout="paper", density=0.2))
     assert not report.failed_layers, report.failure_messages[:2]
-    base = next(r for r in report.regions if r.name == "base")
-    assert abs(base.measured - 0.2) <= 0.05, report.format_table()
+    for region in report.regions:
+        assert abs(region.measured - region.target) <= 0.02 + 0.05 * region.target, report.format_table()

@@ -238,16 +238,40 @@ def test_self_intersecting_region_is_repaired():
     assert abs(result.density - 0.3) <= 0.015
 
 
-def test_figure_10_region_interiors_within_two_points():
-    """Each region is calibrated away from its borders with other regions (where the pattern
-    changes density): measured there, the paper's Figure 10 regions are within the issue's 2 points."""
+def test_figure_10_regions_within_two_points_measured_whole():
+    """Each region is calibrated whole, the bands along its borders with other regions (where the
+    pattern changes density) included: measured so, Figure 10's regions are within 2 points."""
     pattern = InfillPattern.build(star(), 0.3, 0.4, regions=star_regions(), seed=0)
-    zones = pattern.density_map.zones(pattern.footprint)[1:]
-    for zone, (_, want) in zip(zones, star_regions()):
-        others = [z for z in zones if z is not zone]
-        interior = zone.difference(unary_union(others).buffer(0.4))
-        got = measured_density(pattern.segments, interior, 0.4)
+    printed = pattern.clip(star()).segments
+    for zone, (_, want) in zip(pattern.density_map.zones(star())[1:], star_regions()):
+        got = measured_density(printed, zone, 0.4)
         assert abs(got - want) <= 0.02, (got, want)
+
+
+_WHOLE_REGION_CASES = {
+    # name: (base density, region, its density); regions two of their own spacings across and more
+    "box 12 mm at 60 % in 20 %": (0.2, box(34, 34, 46, 46), 0.6),
+    "disk 20 mm at 60 % in 20 %": (0.2, Point(40, 40).buffer(10, 32), 0.6),
+    "strip 8 mm at 60 % in 20 %": (0.2, box(36, 0, 44, 80), 0.6),
+    "box 24 mm at 10 % in 40 %": (0.4, box(28, 28, 52, 52), 0.1),
+}
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("case", list(_WHOLE_REGION_CASES))
+def test_whole_regions_print_their_density(case, seed):
+    """Issue 15: a region measured whole (the band where the pattern changes included) and the rest
+    of the part both print their density within 2 points; the sparse side stays sparse next to the
+    border (its 2 mm along it within 5 points of its density: the change lies on the dense side)."""
+    base, region, density = _WHOLE_REGION_CASES[case]
+    part = box(0, 0, 80, 80)
+    printed = InfillPattern.build(part, base, 0.4, regions=[(region, density)], seed=seed).clip(part).segments
+    rest = part.difference(region)
+    assert abs(measured_density(printed, region, 0.4) - density) <= 0.02
+    assert abs(measured_density(printed, rest, 0.4) - base) <= 0.02
+    sparse_band = (rest.intersection(region.buffer(2.0)) if density > base
+                   else region.difference(region.buffer(-2.0)))
+    assert measured_density(printed, sparse_band, 0.4) <= min(base, density) + 0.05
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -346,7 +370,7 @@ def test_density_at_sharp_borders_is_the_last_region_holding_the_point(seed):
 
 def test_only_coarse_zones_off_target_are_balanced_without_resampling(monkeypatch):
     """A small part whose zones hold a few dozen samples each: one sampling, then balancing, and
-    the zones still end within 2.5 points of their targets (measured away from borders)."""
+    the zones still end within 2.5 points of their targets (measured whole, border bands included)."""
     from DelaunayInfill import pattern as pattern_module
 
     calls = []
@@ -362,8 +386,10 @@ def test_only_coarse_zones_off_target_are_balanced_without_resampling(monkeypatc
     measured = [(got, want) for got, want in zip(pattern.calibrated_densities, targets) if not math.isnan(got)]
     assert len(measured) == len(regions)  # the regions tile the star: the base zone has no area
     for got, want in measured:
-        # (2 points on numpy 1.x; the lattice's zones end 2.05 points off on numpy 2.2 / shapely 2.1)
-        assert abs(got - want) <= 0.025, (pattern.calibrated_densities, targets)
+        # Measured whole (border bands included) zones this small (tips under two of their own
+        # spacings across, the centre one) end up to 2.6 points off (seed 0, numpy 2.x); the 2 points
+        # of issue 15 hold from two spacings across (test_whole_regions_print_their_density).
+        assert abs(got - want) <= 0.03, (pattern.calibrated_densities, targets)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -392,8 +418,8 @@ def test_zones_are_each_region_minus_later_ones_overlapping_or_touching(seed):
 
 
 def test_zone_interiors_drop_a_band_along_borders_with_other_zones_only():
-    """_zone_interiors: each zone loses the points within a line width of another zone (not of
-    the outline), as cutting the whole rest of the area would give; a zone the band would
+    """_zone_interiors (a feathered map's zone cores): each zone loses the points within a line width
+    of another zone (not of the outline); a zone the band would
     (nearly) swallow, or a strip narrower than 1.4 widths, is kept whole."""
     from DelaunayInfill.geometry import to_multipolygon
     from DelaunayInfill.pattern import _zone_interiors
@@ -403,7 +429,7 @@ def test_zone_interiors_drop_a_band_along_borders_with_other_zones_only():
     left, right = box(0, 0, 30, 40), box(30, 0, 60, 40)
     strip = box(0, 0, 60, 0.5)  # between the outline and the other zones
     zones = [to_multipolygon(z) for z in (left.difference(strip), right.difference(strip), strip)]
-    inner = _zone_interiors(zones, width, area)
+    inner = _zone_interiors(zones, width)
     for k in range(2):
         others = area.difference(zones[k])
         want = zones[k].difference(others.buffer(width, 4))
@@ -413,15 +439,15 @@ def test_zone_interiors_drop_a_band_along_borders_with_other_zones_only():
     # The same strip wider than 1.4 widths but swallowed by bands along both long sides: whole too.
     strip = box(0, 10, 60, 11)
     zones = [to_multipolygon(z) for z in (box(0, 0, 60, 10), strip, box(0, 11, 60, 40))]
-    assert _zone_interiors(zones, width, area)[1].equals(zones[1])
+    assert _zone_interiors(zones, width)[1].equals(zones[1])
     # A strip narrower than 1.4 widths mostly along the outline (its band would take 15 %): whole.
     tower = box(0, 0.5, 10, 40)
     strip = box(0, 0, 60, 0.5)
     zones = [to_multipolygon(strip), to_multipolygon(tower)]
-    inner = _zone_interiors(zones, width, unary_union([strip, tower]))
+    inner = _zone_interiors(zones, width)
     assert inner[0].equals(zones[0])
     assert abs(inner[1].area - (tower.area - width * 10)) < 1e-6  # the tower loses its band
-    # Zones that do not tile an area: the others are their union.
+    # Zones side by side: each loses the band along the other.
     apart = [to_multipolygon(box(0, 0, 10, 10)), to_multipolygon(box(10, 0, 20, 10))]
     inner = _zone_interiors(apart, width)
     assert abs(inner[0].area - (100 - 10 * width)) < 1e-6
@@ -461,65 +487,6 @@ def test_raster_meter_measures_like_clipping_within_its_cells():
         assert np.array_equal(meter.contains(k, xy), np.flatnonzero(meter.raster.at(xy) == k))
 
 
-def test_raster_dilation_is_a_disk():
-    from DelaunayInfill.pattern import _dilate
-
-    rng = np.random.default_rng(2)
-    for reach in (0.7, 1.0, 1.6, 2.5, 3.9):
-        pad = int(reach) + 1
-        mask = np.zeros((30, 40), dtype=bool)
-        # Rows of 40 cells, the last `pad` of each a frame (also before the next row's first cell).
-        mask[pad:-pad, :40 - pad] = rng.random((30 - 2 * pad, 40 - pad)) < 0.02
-        got = _dilate(mask.ravel(), reach, 40).reshape(mask.shape)[:, :40 - pad]
-        rows, cols = np.nonzero(mask)
-        yy, xx = np.mgrid[0:30, 0:40]
-        want = np.zeros_like(mask)
-        for r, c in zip(rows, cols):
-            want |= (yy - r) ** 2 + (xx - c) ** 2 <= reach**2 + 1e-9
-        assert np.array_equal(got, want[:, :40 - pad]), reach
-
-
-def test_raster_interiors_drop_bands_along_other_zones_and_the_outline():
-    """_raster_interiors: a zone loses its cells within a line width of another zone, and within
-    `outline` of the area's outline; a zone the bands would (nearly) swallow (here strips narrower
-    than 1.4 widths) is kept whole."""
-    from DelaunayInfill.density import DensityMap
-    from DelaunayInfill.pattern import _raster_interiors
-
-    width, cell = 0.4, 0.18
-    area = box(0, 0, 60, 40)
-    regions = [(box(30, 0, 60, 40), 0.4), (box(0, 0, 60, 0.3), 0.3), (box(10, 20, 10.4, 38), 0.5)]
-    dmap = DensityMap.create(0.2, regions)
-    raster = dmap.raster(area, cell)
-    ny, nx = raster.labels.shape
-    gx, gy = np.meshgrid(raster.x0 + (np.arange(nx) + 0.5) * cell, raster.y0 + (np.arange(ny) + 0.5) * cell)
-    for outline in (0.0, 2 * width):
-        inner, apart = _raster_interiors(raster, 4, width, outline)
-        inner, apart = inner.labels, apart.labels
-        assert np.array_equal(apart, _raster_interiors(raster, 4, width, 0.0)[0].labels)  # others only
-        kept = inner >= 0
-        assert (inner[kept] == raster.labels[kept]).all()  # cells only dropped, never relabelled
-        # The left and right halves: dropped near x = 30, near the strip (y = 0.3) and the thin tower,
-        # and, with an outline band, near the outline; kept farther off.  (A border cell's centre
-        # lies within a cell of the border: "near" and "far" leave half a cell either way.)
-        to_tower = np.hypot(np.maximum(np.abs(gx - 10.2) - 0.2, 0), np.maximum(np.abs(gy - 29) - 9, 0))
-        to_other = np.minimum.reduce([np.abs(gx - 30), np.abs(gy - 0.3), to_tower])
-        to_outline = np.minimum.reduce([gx, 60 - gx, gy, 40 - gy])
-        near = to_other <= width - 0.5 * cell - 1e-9
-        far = to_other > width + 0.5 * cell + 1e-9
-        if outline:
-            near |= to_outline <= outline - 0.5 * cell - 1e-9
-            far &= to_outline > outline + 0.5 * cell + 1e-9
-        for k in (0, 1):
-            zone = raster.labels == k
-            assert (zone & near).any() and (zone & far).any()
-            assert not (kept & zone & near).any(), (k, outline)
-            assert kept[zone & far].all(), (k, outline)
-        # The strip along the bottom (0.3 mm) and the 0.4 mm tower: swallowed, kept whole.
-        for k in (2, 3):
-            assert (kept[raster.labels == k]).all()
-
-
 def test_balancing_keeps_its_best_round(monkeypatch):
     """Balancing stops two rounds after the largest shortfall last got smaller and keeps the round
     that had it (refinement can go back and forth between neighbouring zones)."""
@@ -538,7 +505,7 @@ def test_balancing_keeps_its_best_round(monkeypatch):
     shortfalls = iter([0.02, 0.008, 0.012, 0.011, 0.001, 0.0])  # round 2 best, then no better twice
     rounds = []
 
-    def scripted(points, triangles, meter, targets, width, small, known=None):
+    def scripted(points, triangles, meter, targets, width, small, known=None, limit=None):
         measured = list(targets)
         measured[3] = targets[3] - next(shortfalls)
         rounds.append(len(points))
@@ -553,19 +520,14 @@ def test_balancing_keeps_its_best_round(monkeypatch):
 
 
 def test_several_zone_build_calibrates_each_zone_measured_exactly():
-    """Through the raster meter, Figure 10's zones (measured exactly, by clipping, on the zones'
-    interiors) land near their targets."""
-    from DelaunayInfill.geometry import to_multipolygon
-    from DelaunayInfill.pattern import _zone_interiors
-
+    """Through the raster meter, Figure 10's zones (measured exactly, by clipping, each zone whole:
+    the bands along other zones included) land within 2 points of their targets."""
     regions = star_regions()
     pattern = InfillPattern.build(star(), 0.2, 0.4, regions=regions, seed=0)
     zones = pattern.density_map.zones(star())
-    inner = _zone_interiors(zones, 0.4, star())
-    for zone, target in zip(inner[1:], [d for _, d in regions]):
-        core = to_multipolygon(zone.buffer(-0.8, 4))  # as the report measures: away from the outline too
-        got = measured_density(pattern.segments, core if core.area > 0.3 * zone.area else zone, 0.4)
-        assert abs(got - target) <= 0.03, (got, target)
+    for zone, target in zip(zones[1:], [d for _, d in regions]):
+        got = measured_density(pattern.clip(star()).segments, zone, 0.4)
+        assert abs(got - target) <= 0.02, (got, target)
 
 
 def test_raster_meter_only_where_it_measures_well():
@@ -582,3 +544,30 @@ def test_raster_meter_only_where_it_measures_well():
     assert _raster_meter(large, DensityMap.create(0.2, [(box(10, 10, 14, 14), 0.4)]), width) is None
     meter = _raster_meter(large, DensityMap.create(0.2, [(box(10, 10, 60, 60), 0.4)]), width)
     assert isinstance(meter, _RasterMeter) and meter.raster.cell > width
+
+
+_NODE_CASES = {
+    "a 60 % box in 20 %": (box(0, 0, 80, 80), 0.2, [(box(30, 30, 50, 50), 0.6)]),
+    "a 10 % box in 40 %": (box(0, 0, 80, 80), 0.4, [(box(28, 28, 52, 52), 0.1)]),
+    "Figure 10": (star(), 0.2, star_regions()),
+}
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
+@pytest.mark.parametrize("case", list(_NODE_CASES))
+def test_no_node_with_more_than_eight_edges_and_no_short_edge(case, seed):
+    """Issue 15: where zones meet (Poisson-disk bands, balancing's inserted points) no node of the
+    pattern has more than 8 edges (9 and 10 were measured there), and no edge inside the part is shorter
+    than a quarter of the local spacing (the triangular lattice's side at the denser end's density)."""
+    footprint, base, regions = _NODE_CASES[case]
+    pattern = InfillPattern.build(footprint, base, 0.4, regions=regions, seed=seed)
+    segments = pattern.segments
+    ends = np.round(segments.reshape(-1, 2), 9)
+    nodes, index, counts = np.unique(ends, axis=0, return_inverse=True, return_counts=True)
+    inside = np.array([footprint.contains(Point(*xy)) for xy in nodes])
+    assert counts[inside].max() <= 8
+    both_inside = inside[index.reshape(-1, 2)].all(axis=1)
+    density = np.maximum(pattern.density_map.at(segments[:, 0]), pattern.density_map.at(segments[:, 1]))
+    spacing = 2.0 * np.sqrt(3.0) * 0.4 / density
+    length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
+    assert (length[both_inside] >= 0.25 * spacing[both_inside]).all()

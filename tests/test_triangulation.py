@@ -9,8 +9,10 @@ from DelaunayInfill.triangulation import (
     canonical_triangles,
     delaunay_triangles,
     lop_violations,
+    node_edge_counts,
     relax_points,
     triangle_angles,
+    uncrowded_edges,
     unique_edges,
 )
 
@@ -113,3 +115,56 @@ def test_canonical_triangles_ignore_order_and_starting_corner():
     assert np.array_equal(canon, canonical_triangles(tri))
     assert (canon[:, 0] < canon[:, 1:].min(axis=1)).all()  # smallest index first
     assert {tuple(np.roll(t, -int(np.argmin(t)))) for t in tri.tolist()} == set(map(tuple, canon.tolist()))
+
+
+# ----------------------------------------------------------------------------- crowded nodes
+def _fan(spokes: int, radius=3.0):
+    """A hub joined to `spokes` rim points, the rim closed, each rim point also joined outwards.
+
+    Segments (3 spokes, 2, 2): the spokes, the rim, the outer spokes (rim points have 4 edges).
+    """
+    angle = np.linspace(0.0, 2.0 * np.pi, spokes, endpoint=False)
+    radius = np.broadcast_to(np.asarray(radius, dtype=float), angle.shape)  # mm, one per spoke
+    rim = np.c_[radius * np.cos(angle), radius * np.sin(angle)]
+    hub = np.zeros((spokes, 2))
+    return np.concatenate((np.stack((hub, rim), axis=1), np.stack((rim, np.roll(rim, -1, axis=0)), axis=1),
+                           np.stack((rim, 2.0 * rim), axis=1)))
+
+
+def test_a_hub_with_twelve_spokes_keeps_eight_spread_round_it():
+    segments = _fan(12)
+    keep = uncrowded_edges(segments)
+    _, ends, counts = node_edge_counts(segments[keep])
+    hub = np.flatnonzero((node_edge_counts(segments[keep])[0] == 0).all(axis=1))[0]
+    assert counts[hub] == 8
+    assert keep[12:].all()  # the rim and the outer spokes stay
+    # the spokes left are spread: no gap wider than a quarter turn opened
+    kept = segments[:12][keep[:12]][:, 1]
+    angles = np.sort(np.degrees(np.arctan2(kept[:, 1], kept[:, 0])))
+    gaps = np.diff(np.append(angles, angles[0] + 360.0))
+    assert gaps.max() <= 90.0 + 1e-9
+
+
+def test_a_crowded_node_between_two_densities_gives_up_its_short_edges():
+    """At a node with long edges on one side and short ones on the other (a sparse sample next to a
+    dense band), the short edges go: they print the least."""
+    segments = _fan(12, np.r_[np.full(6, 1.2), np.full(6, 3.0)])  # one half turn of short spokes
+    keep = uncrowded_edges(segments)
+    assert keep[6:12].all() and (~keep[:6]).sum() == 4
+
+
+def test_nodes_keep_their_edges_when_no_node_is_crowded():
+    segments = _fan(8)
+    assert uncrowded_edges(segments).all()
+
+
+def test_a_short_edge_goes_while_both_ends_keep_three():
+    segments = _fan(6)
+    # a second hub 0.2 mm from the first, joined to it and to the rim
+    near = np.array([0.2, 0.0])
+    rim = segments[:6, 1]
+    extra = np.concatenate((np.array([[[0.0, 0.0], near]]), np.stack((np.tile(near, (6, 1)), rim), axis=1)))
+    segments = np.concatenate((segments, extra))
+    keep = uncrowded_edges(segments, shortest=0.5)
+    assert not keep[18]  # the 0.2 mm edge between the hubs
+    assert keep.sum() == len(segments) - 1

@@ -141,7 +141,7 @@ class Survey:
 
 
 # ----------------------------------------------------------------------------- patterns
-def _build_pattern(footprint, density, line_width, regions, settings: ProcessSettings, inset: float = 0.0):
+def _build_pattern(footprint, density, line_width, regions, settings: ProcessSettings, infill_area=None):
     from ..pattern import InfillPattern
 
     return InfillPattern.build(
@@ -154,7 +154,7 @@ def _build_pattern(footprint, density, line_width, regions, settings: ProcessSet
         calibration=settings.calibration,
         relax=settings.relax,
         feather=settings.feather,
-        inset=inset,
+        infill_area=infill_area,
     )
 
 
@@ -232,8 +232,11 @@ class PatternCache:
             # the pattern of its own area.)
             footprint = unary_union([footprint, shapely_box(*extent)])
         footprint = to_multipolygon(footprint.buffer(line_width, 4))
-        # the infill area lies a line width inside the footprint (the paper layout calibrates on it)
-        pattern = _build_pattern(footprint, density, line_width, regions, self.settings, inset=line_width)
+        # Calibrated where this layer prints (not over the rest of the footprint: a mesh's extent holds
+        # its holes and the places round it); a pattern for a section that grew, over its footprint (it
+        # then prints about the lattice of the one it follows where they overlap: the infill stacks).
+        printed = area if grow_from is None else to_multipolygon(footprint.buffer(-line_width, 4))
+        pattern = _build_pattern(footprint, density, line_width, regions, self.settings, infill_area=printed)
         self.builds += 1
         bucket.insert(0, (footprint, regions, pattern))
         del bucket[self.per_key :]
@@ -901,7 +904,7 @@ class _Run:
             with clock("patterns"):
                 pattern, _, used_regions = self.patterns.get(st.name, area, density, lw, region_list)
                 result = self._clip(pattern, self._line_area(area, lw, st.overlap), start)
-                paths = self._paths(result, min_length=lw / 2)
+                paths = self._paths(result, min_length=lw)  # (a stub under a line width prints a blob)
             with clock("density report"):
                 self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
         # Cura's lines where the new infill does not take over (a part not confirmed, an island too
@@ -1134,15 +1137,21 @@ class _Run:
         return hit[1]
 
     def _line_area(self, area, lw: float, overlap: float):
-        """Where new lines may run: `area` shrunk by half a line width less the overlap (remembered)."""
+        """Where new lines may run: `area` without its parts narrower than a line width less twice the overlap.
+
+        Lines run to the area's edge, as Cura's own do (CuraEngine 4.13 and 5.0 end them on the inner
+        wall's edge grown by the infill overlap: the same infill length per area), but not into its
+        slivers: where walls meet at a sharp tip or a stroke of lettering narrows, Cura prints no
+        infill (the opening: shrunk by half a line width less the overlap, grown back).  Remembered.
+        """
         inset = lw / 2 - overlap
         if inset <= 1e-6:
             return area
         key = (*_shape_key(area), round(inset, 6))
         hit = self.line_areas.get(key)
         if hit is None or hit[0] is not area:
-            inner = to_multipolygon(area.buffer(-inset, 4))
-            hit = (area, inner if not inner.is_empty else area)
+            opened = to_multipolygon(area.buffer(-inset, 4).buffer(inset, 4).intersection(area))
+            hit = (area, opened if not opened.is_empty else area)
             if len(self.line_areas) >= 16:
                 self.line_areas.pop(next(iter(self.line_areas)))
             self.line_areas[key] = hit
@@ -1211,8 +1220,8 @@ class _Run:
         """The result's paths as float arrays, the same objects for a remembered clip result.
 
         Pieces shorter than `min_length` (mm) are left out: a clip can leave a
-        stub of a few hundredths of a millimetre in a sharp corner, which prints
-        nothing useful yet costs a travel (and often a retraction) to reach.
+        stub in a sharp corner or across a narrow stroke, which prints nothing
+        useful yet costs a travel (and often a retraction) to reach.
         """
         hit = self.result_memo.get(id(result))
         if hit is None or hit[0] is not result or hit[3] != min_length:
@@ -1226,14 +1235,12 @@ class _Run:
         return hit[1]
 
     def _zones(self, area, regions, lw, disjoint: bool = False):
-        """Each zone's interior and its area: index k regions[k], last the base (cached per area and regions).
+        """Each zone and its area: index k regions[k], last the base (cached per area and regions).
 
-        A zone's interior leaves out a band of one line width along its border:
-        along other zones the pattern changes from one density to the other
-        (the engine calibrates the interiors), along the part's outline the
-        lines end (like Cura's, half a line width less the overlap before it).
-        A zone the band would (nearly) swallow is measured whole.  `disjoint`:
-        the regions are disjoint parts of `area` (a modifier split's), each its own part.
+        Zones are measured whole, the bands along their borders included (the
+        pattern is calibrated on whole zones too: a region prints its density
+        over all of itself).  `disjoint`: the regions are disjoint parts of
+        `area` (a modifier split's), each its own part.
         """
         key = (*_shape_key(area), tuple(id(r) for r in regions), round(lw, 4), disjoint)
         hit = self.zone_areas.get(key)
@@ -1263,20 +1270,14 @@ class _Run:
             every = unary_union([r[0] for r in regions]) if disjoint else (
                 regions[0][0] if later is None else later.union(regions[0][0]))
             owns.append(to_multipolygon(area.difference(every)))
-        inner = list(owns)
-        for k, own in enumerate(owns):
-            if own.area > 0:
-                core = to_multipolygon(own.buffer(-lw, 4))
-                if core.area >= 0.3 * own.area:
-                    inner[k] = core
-        zones = (inner, [z.area for z in inner])
+        zones = (owns, [z.area for z in owns])
         if len(self.zone_areas) > 256:
             self.zone_areas.clear()
         self.zone_areas[key] = ([r for r in regions], zones)  # holding them keeps the ids valid
         return zones
 
     def _zone_lengths(self, result, paths, zones, lw) -> np.ndarray:
-        """New infill length inside each zone interior, remembered per clip result and zones."""
+        """New infill length inside each zone, remembered per clip result and zones."""
         memo = self.result_memo[id(result)][2]
         key = (id(zones), lw)
         hit = memo.get(key)
@@ -1292,7 +1293,7 @@ class _Run:
         n = np.maximum(1, np.ceil(seg_len / step).astype(np.int64)) + 1
         pts = sample_segments(segs, step)
         weight = np.repeat(seg_len / n, n)
-        owner = np.full(len(pts), len(zones))  # len(zones): in no interior (a border band)
+        owner = np.full(len(pts), len(zones))  # len(zones): in no zone
         for k, zone in enumerate(zones):
             free = owner == len(zones)
             if zone.area > 0 and free.any():

@@ -640,10 +640,12 @@ class DensityRegion:
 
 
 def measure_region_densities(parsed: Parsed, geometry: SliceGeometry, settings: SliceSettings,
-                             regions: list[DensityRegion]) -> dict[str, tuple[float, float]]:
+                             regions: list[DensityRegion], *, whole: bool = True) -> dict[str, tuple[float, float]]:
     """Measured density per region: infill length x line width / infill area, over all FILL layers.
 
-    Regions later in the list win where they overlap; "base" is the rest.
+    Regions later in the list win where they overlap; "base" is the rest.  `whole`: each region
+    whole, the band along its borders included (issue 15); else its interior, a line width in from
+    its borders (Cura's infill-mesh lines stop short of their mesh's border).
     Returns name -> (measured fraction, area mm^2 summed over layers).
     """
     fill = _segments_by_layer(parsed.fill_moves(extruding=True))
@@ -666,8 +668,9 @@ def measure_region_densities(parsed: Parsed, geometry: SliceGeometry, settings: 
         for name, piece in pieces:
             if piece.is_empty or piece.area < 1.0:
                 continue
-            # Shrink the area a little so lines on the border count once: measure inside the interior.
-            inner = piece.buffer(-settings.line_width, join_style=2)
+            # Whole: a line on a border is cut there, each side counts its own part.  Interior: lines on
+            # the border count once.
+            inner = piece if whole else piece.buffer(-settings.line_width, join_style=2)
             if inner.is_empty:
                 continue
             totals[name][0] += lines.intersection(inner).length
@@ -676,10 +679,13 @@ def measure_region_densities(parsed: Parsed, geometry: SliceGeometry, settings: 
 
 
 def check_region_densities(parsed: Parsed, geometry: SliceGeometry, settings: SliceSettings,
-                           regions: list[DensityRegion], *, tolerance: float = 0.02) -> CheckResult:
-    """Check 4: measured density per region within `tolerance` (fraction: 0.02 = 2 points) of its target."""
+                           regions: list[DensityRegion], *, tolerance: float = 0.02, whole: bool = True) -> CheckResult:
+    """Check 4: measured density per region within `tolerance` (fraction: 0.02 = 2 points) of its target.
+
+    `whole`: see `measure_region_densities`.
+    """
     res = CheckResult("4 region densities")
-    measured = measure_region_densities(parsed, geometry, settings, regions)
+    measured = measure_region_densities(parsed, geometry, settings, regions, whole=whole)
     targets = {r.name: r.target for r in regions}
     targets["base"] = settings.density
     for name, (value, area) in measured.items():

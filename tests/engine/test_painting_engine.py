@@ -115,15 +115,17 @@ def _measure(processed: str, reference: str, truth, line_width: float) -> dict:
             continue
         height = zs[i] - zs[i - 1] if i > 0 else zs[i]
         mid = zs[i] - height / 2
-        area = lines_buffer(ref[key].fill, line_width / 2 + REFERENCE_MERGE_MM)
+        # Cura's infill area: the dense reference lines' footprint, less the half width their ends reach
+        # past it (Cura's lines end on the area's edge)
+        area = lines_buffer(ref[key].fill, line_width / 2 + REFERENCE_MERGE_MM).buffer(-line_width / 2, join_style=2)
         painted = translate(truth(mid), *BED)
         lines = shapely.multilinestrings(shapely.linestrings(layer.fill))
+        # each piece whole, the bands along the painted region's border included (issue 15)
         for name, piece in (("painted", area.intersection(painted)), ("rest", area.difference(painted))):
-            inner = piece.buffer(-line_width, join_style=2)
-            if inner.is_empty or inner.area < 1.0:
+            if piece.is_empty or piece.area < 1.0:
                 continue
-            totals[name][0] += lines.intersection(inner).length
-            totals[name][1] += inner.area
+            totals[name][0] += lines.intersection(piece).length
+            totals[name][1] += piece.area
     return {k: (v[0] * line_width / v[1] if v[1] else math.nan, v[1]) for k, v in totals.items()}
 
 

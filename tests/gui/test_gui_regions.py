@@ -43,7 +43,9 @@ PMS_SETTINGS = {
     "wall_thickness": 0, "top_bottom_thickness": 0, "top_layers": 0, "bottom_layers": 0,
 }
 SPARSE_Z = (1.4, 10.4)  # mm: layers with sparse infill (above the bottom skin, below the top skin)
-MARGIN = 1.0  # mm kept away from region borders when measuring
+MARGIN = 1.0  # mm kept away from a region's top and bottom when measuring (the layers there meet skin)
+# Across, a region is measured whole, the band along its border included (issue 15): what it prints over
+# all of itself.
 TOLERANCE_POINTS = 2.0  # issue 3's bar for every region, Per Model Settings boxes included
 MARKER = ";DELAUNAYINFILL_PROCESSED"
 
@@ -197,8 +199,8 @@ def _sphere_window(region):
     centre, radius = (lo + hi) / 2, region["size"] / 2
 
     def at(z):
-        r = math.sqrt(max(radius**2 - (z - centre[2]) ** 2, 0.0)) - MARGIN
-        return Point(centre[0], centre[1]).buffer(r, 64) if r > 3.0 else None
+        r = math.sqrt(max(radius**2 - (z - centre[2]) ** 2, 0.0))
+        return Point(centre[0], centre[1]).buffer(r, 64) if r > 3.0 + MARGIN else None
 
     return at
 
@@ -210,7 +212,7 @@ def _cylinder_window(region):
     def at(z):
         if not lo[2] + MARGIN <= z <= hi[2] - MARGIN:
             return None
-        return Point(centre[0], centre[1]).buffer(radius - MARGIN, 64)
+        return Point(centre[0], centre[1]).buffer(radius, 64)
 
     return at
 
@@ -308,7 +310,7 @@ def _box_window(region):
     def at(z):
         if not lo[2] + MARGIN <= z <= hi[2] - MARGIN:
             return None
-        return box(lo[0] + MARGIN, lo[1] + MARGIN, hi[0] - MARGIN, hi[1] - MARGIN)
+        return box(lo[0], lo[1], hi[0], hi[1])
 
     return at
 

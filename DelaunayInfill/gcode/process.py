@@ -18,13 +18,12 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.spatial import cKDTree
 from shapely.geometry import box as shapely_box
 
 from ..combing import CombingArea
-from ..geometry import contains_xy, empty_area, polygons_of, to_multipolygon, unary_union
+from ..geometry import contains_xy, covers, empty_area, polygons_of, to_multipolygon, unary_union
 from ..routing import TravelCost, order_paths, plan_runs
-from .area import AreaCache, MeshLayer, fraction_inside, mesh_layer, runs_of, sample_segments, segments_of
+from .area import AreaCache, MeshLayer, fraction_inside, mesh_layer, sample_segments, segments_of
 from .emit import EmitParams, emit_block
 from .estimate import move_seconds, move_times
 from .footer import read_footer
@@ -58,7 +57,7 @@ from .replay import (
 from .settings import MeshSettings, ProcessReport, ProcessSettings, Region, RegionReport
 from .split import split_by_line_ends
 from .stages import OFF
-from .witness import kept_cura_pieces, witness_radius, witnessed
+from .witness import kd_tree, kept_cura_pieces, witness_radius, witnessed
 
 __all__ = [
     "process_gcode",
@@ -215,8 +214,8 @@ class PatternCache:
             if self._covered.get(id(footprint)) is area:  # the same area object fitted last time
                 bucket.insert(0, bucket.pop(i))
                 return pattern, footprint, cached_regions
-            outside = area.difference(footprint).area
-            if outside <= max(1e-6, 0.25 * line_width * area.length):
+            # (the usual answer, inside, from a predicate; the overlay only for an area that leaves it)
+            if covers(footprint, area) or area.difference(footprint).area <= max(1e-6, 0.25 * line_width * area.length):
                 self._covered[id(footprint)] = area
                 bucket.insert(0, bucket.pop(i))
                 return pattern, footprint, cached_regions
@@ -374,6 +373,15 @@ class _MeshStep:
     line_width: float
     overlap: float
     closing: float  # closing radius of a FILL hull: about Cura's line spacing
+
+
+@dataclass
+class _LayerRegions:
+    """A host's density regions in one layer, as the pattern takes them."""
+
+    regions: list  # (area, density fraction, name), later ones win: the user's, then the modifiers' parts
+    covered_children: set  # modifiers whose area the host's seamless pattern fills
+    split_parts_only: bool  # the regions are only the modifier split's parts (disjoint, inside the area)
 
 
 @dataclass
@@ -855,29 +863,14 @@ class _Run:
         """The new infill of a host mesh and its modifiers (None: none, Cura's stays): its area confirmed by
         Cura's lines, its density regions, the pattern's paths, and Cura's lines where those do not take over."""
         lw = st.line_width
-        blocks = parse.blocks
         clock = self.clock
         if not st.geo.used_hull:  # (a hull is made of the lines: witnessed already)
             with clock("areas"):
                 st.geo = self._witnessed(parse, st.geo, [c.geo for c in children], lw)
         g = st.geo
         area = g.area
-        region_list = [(a, r.density, r.name or f"region {k + 1}") for k, r in enumerate(self.user_regions)
-                       for a in [r.at(self._slice_z(parse.z))] if not a.is_empty]
-        # Without user regions here, the regions are the modifier split's parts: disjoint, inside `area`.
-        split_parts_only = not region_list
-        covered_children = set()  # modifiers whose area the host's pattern fills
-        given = {r[2] for r in region_list}
-        # (the modifiers' parts are pieces of the host's area: `_modifier_areas` splits it)
-        with clock("areas"):
-            parts = self._modifier_areas(st, children) if children else []
-        for c, ca in zip(children, parts, strict=True):
-            if ca.is_empty:
-                continue
-            covered_children.add(c.name)
-            if c.name in given or c.name.replace("\\", "/").rsplit("/", 1)[-1] in given:
-                continue  # the caller gave this modifier's exact mesh as a Region: keep that one only
-            region_list.append((ca, self._region_mesh_density(c.name, c.geo.fill, c.line_width, ca), f"mesh {c.name}"))
+        zones = self._layer_regions(parse, st, children)
+        region_list, split_parts_only = zones.regions, zones.split_parts_only
         if area.is_empty:
             if len(g.fill):  # nothing confirmed: Cura's infill of this mesh stays, and is counted
                 out.stats["cura_infill_kept_mm"] += float(np.hypot(*(g.fill[:, 1] - g.fill[:, 0]).T).sum())
@@ -891,13 +884,7 @@ class _Run:
         region_list, empty, empty_parts = _split_empty_regions(region_list)
         if empty is not None:
             area = to_multipolygon(area.difference(empty))
-        names = {st.name, *(c.name for c in children)}
-        my_blocks = [i for i, b in enumerate(blocks) if b.has_moves and b.mesh in names]
-        # Every FILL block of the host and its modifiers may carry new paths, travel-only ones too
-        # (Cura's hops between its blocks): a path printed on the way costs no travel.
-        fill_blocks = [bi for bi in my_blocks if not blocks[bi].unsupported] or my_blocks[:1]
-        first = blocks[fill_blocks[0]].before
-        start = (first.x, first.y) if math.isfinite(first.x) else None
+        my_blocks, fill_blocks, start = _host_blocks(parse.blocks, {st.name, *(c.name for c in children)})
         if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
             paths, used_regions = [], []
         else:
@@ -907,20 +894,47 @@ class _Run:
                 paths = self._paths(result, min_length=lw)  # (a stub under a line width prints a blob)
             with clock("density report"):
                 self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
-        # Cura's lines where the new infill does not take over (a part not confirmed, an island too
-        # small for the pattern) are printed as Cura printed them, on the route with the new paths.
         reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
-        cura_fill = np.concatenate([g.fill, *(c.geo.fill for c in children)])
         with clock("Cura's lines kept"):
-            kept = kept_cura_pieces(cura_fill, area, paths, lw, reach, empty)
-            if kept:
-                paths, _ = order_paths([*paths, *kept], start)
-            out.stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))
-            out.stats["layers_with_cura_infill_kept"] = 1
+            paths = self._with_cura_kept(st, children, area, paths, reach, empty, start, out)
         for part, zname in empty_parts:
             self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
         travel_part = g.part if g.part is not None else area.buffer(lw / 2)
-        return _HostInfill(st, my_blocks, fill_blocks, paths, reach, empty, covered_children, travel_part)
+        return _HostInfill(st, my_blocks, fill_blocks, paths, reach, empty, zones.covered_children, travel_part)
+
+    def _layer_regions(self, parse: LayerParse, st: _MeshStep, children: list) -> _LayerRegions:
+        """The density regions of a host in this layer: the user's at its slice height, then its modifiers' parts."""
+        regions = [(a, r.density, r.name or f"region {k + 1}") for k, r in enumerate(self.user_regions)
+                   for a in [r.at(self._slice_z(parse.z))] if not a.is_empty]
+        # Without user regions here, the regions are the modifier split's parts: disjoint, inside the area.
+        zones = _LayerRegions(regions, set(), split_parts_only=not regions)
+        given = {r[2] for r in regions}
+        # (the modifiers' parts are pieces of the host's area: `_modifier_areas` splits it)
+        with self.clock("areas"):
+            parts = self._modifier_areas(st, children) if children else []
+        for c, ca in zip(children, parts, strict=True):
+            if ca.is_empty:
+                continue
+            zones.covered_children.add(c.name)
+            if c.name in given or c.name.replace("\\", "/").rsplit("/", 1)[-1] in given:
+                continue  # the caller gave this modifier's exact mesh as a Region: keep that one only
+            regions.append((ca, self._region_mesh_density(c.name, c.geo.fill, c.line_width, ca), f"mesh {c.name}"))
+        return zones
+
+    def _with_cura_kept(self, st: _MeshStep, children: list, area, paths: list, reach: float, empty, start,
+                        out: _LayerOut) -> list:
+        """`paths` with Cura's lines where the new infill does not take over, all in print order.
+
+        Those lines (a part not confirmed, an island too small for the pattern) are printed as Cura
+        printed them, on the route with the new paths; `out` counts them.
+        """
+        cura_fill = np.concatenate([st.geo.fill, *(c.geo.fill for c in children)])
+        kept = kept_cura_pieces(cura_fill, area, paths, st.line_width, reach, empty)
+        if kept:
+            paths, _ = order_paths([*paths, *kept], start)
+        out.stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))
+        out.stats["layers_with_cura_infill_kept"] = 1
+        return paths
 
     def _route(self, parse: LayerParse, host: _HostInfill, out: _LayerOut) -> None:
         """The host's paths shared among its FILL blocks (`host.assigned`)."""
@@ -955,7 +969,7 @@ class _Run:
                 covered = np.zeros(len(probe), dtype=bool)
                 if host.paths:
                     if new_tree is None:
-                        new_tree = cKDTree(np.concatenate([sample_segments(np.stack([p[:-1], p[1:]], axis=1),
+                        new_tree = kd_tree(np.concatenate([sample_segments(np.stack([p[:-1], p[1:]], axis=1),
                                                                            host.mesh.line_width) for p in host.paths]))
                     covered |= new_tree.query(probe)[0] <= host.reach
                 if host.empty is not None:  # places of a 0 % region need no infill
@@ -1083,9 +1097,8 @@ class _Run:
                 found = [2.0 * lw / d] if d else None
             if found:
                 spacing = max(spacing or 0.0, *found)
-        mask = parse.extruding() & parse.kind_mask(FILL)
-        runs = runs_of(parse, mask & np.isin(parse.moves["mesh"], [parse.meshes.index(m) for m in (g.mesh, *(c.mesh for c in children))]))
-        area = witnessed(g.area, runs, lw, witness_radius(spacing, lw))
+        # (each mesh's FILL lines in the order printed: `witnessed` joins them into runs only if it must)
+        area = witnessed(g.area, np.concatenate(fills), lw, witness_radius(spacing, lw))
         out = replace(g, area=area)
         if len(self.witnessed_memo) >= 32:
             self.witnessed_memo.pop(next(iter(self.witnessed_memo)))
@@ -1332,6 +1345,19 @@ class _Run:
             r.regions.append(RegionReport(name, t.target, measured, t.area, t.layers))
         return patch_header(header, self.time_delta, self.e_before, self.e_delta, self.s, volumetric=self.info.volumetric,
                             layers=(r.layers_processed, r.layers_kept, len(r.failed_layers)))
+
+
+def _host_blocks(blocks: list, names: set) -> tuple[list[int], list[int], tuple | None]:
+    """A host's FILL blocks (its and its modifiers', `names`), those that may carry new paths, and where the first starts.
+
+    Every FILL block of the host and its modifiers may carry new paths, travel-only ones too (Cura's
+    hops between its blocks): a path printed on the way costs no travel.  Returns (indices into
+    `blocks`, the supported ones among them, the first of those's start (x, y) mm or None).
+    """
+    mine = [i for i, b in enumerate(blocks) if b.has_moves and b.mesh in names]
+    fill_blocks = [bi for bi in mine if not blocks[bi].unsupported] or mine[:1]
+    first = blocks[fill_blocks[0]].before
+    return mine, fill_blocks, ((first.x, first.y) if math.isfinite(first.x) else None)
 
 
 def _block_anchors(parse: LayerParse, fill_blocks: list[int]) -> np.ndarray | None:

@@ -442,7 +442,6 @@ class _Run:
         self.result_memo: dict[int, tuple] = {}
         self.cura_density: dict[str, float] = {}
         self.modifier_areas: dict[tuple, object] = {}
-        self.line_areas: dict[tuple, tuple] = {}
         self.shares: dict[tuple, tuple] = {}
         self.reach_density: dict[str, float] = {}
         self.few_lines_density: dict[tuple, float] = {}
@@ -890,7 +889,10 @@ class _Run:
         else:
             with clock("patterns"):
                 pattern, _, used_regions = self.patterns.get(st.name, area, density, lw, region_list)
-                result = self._clip(pattern, self._line_area(area, lw, st.overlap), start)
+                # Lines run to the area's edge, as Cura's own do (CuraEngine 4.13 and 5.0 end them on the
+                # inner wall's edge grown by the infill overlap: the same infill length per area); the
+                # stubs a clip leaves across a narrow stroke or in a sharp tip are left out below.
+                result = self._clip(pattern, area, start)
                 paths = self._paths(result, min_length=lw)  # (a stub under a line width prints a blob)
             with clock("density report"):
                 self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
@@ -1147,27 +1149,6 @@ class _Run:
             if len(self.grown) >= 64:
                 self.grown.pop(next(iter(self.grown)))
             self.grown[key] = hit
-        return hit[1]
-
-    def _line_area(self, area, lw: float, overlap: float):
-        """Where new lines may run: `area` without its parts narrower than a line width less twice the overlap.
-
-        Lines run to the area's edge, as Cura's own do (CuraEngine 4.13 and 5.0 end them on the inner
-        wall's edge grown by the infill overlap: the same infill length per area), but not into its
-        slivers: where walls meet at a sharp tip or a stroke of lettering narrows, Cura prints no
-        infill (the opening: shrunk by half a line width less the overlap, grown back).  Remembered.
-        """
-        inset = lw / 2 - overlap
-        if inset <= 1e-6:
-            return area
-        key = (*_shape_key(area), round(inset, 6))
-        hit = self.line_areas.get(key)
-        if hit is None or hit[0] is not area:
-            opened = to_multipolygon(area.buffer(-inset, 4).buffer(inset, 4).intersection(area))
-            hit = (area, opened if not opened.is_empty else area)
-            if len(self.line_areas) >= 16:
-                self.line_areas.pop(next(iter(self.line_areas)))
-            self.line_areas[key] = hit
         return hit[1]
 
     def _cura_density(self, mesh: str, fill: np.ndarray, lw: float) -> float:

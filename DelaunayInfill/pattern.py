@@ -544,7 +544,7 @@ class InfillPattern:
             triangles = _drop_slivers(points, triangles, radius_fn)
             edges = unique_edges(triangles)
             # crowded nodes thinned before measuring: the calibration makes up for what they lose
-            edges = edges[uncrowded_edges(points[edges], _shortest_edges(points[edges], dmap, width))]
+            edges = edges[_uncrowded(points[edges], dmap, width)]
             segments = points[edges]
             inside = meter.inside_all(segments)
             measured = meter.densities_of(inside, width)
@@ -596,8 +596,8 @@ class InfillPattern:
             known = {"keys": _edge_keys(edges), "values": inside}
             points, triangles, segments, measured = _balance_zones(
                 points, triangles, meter, targets, width, off, known=known, growing=growing,
-                limit=lambda segs: uncrowded_edges(segs, _shortest_edges(segs, dmap, width)))
-        keep = uncrowded_edges(segments, _shortest_edges(segments, dmap, width))
+                limit=lambda segs: _uncrowded(segs, dmap, width))
+        keep = _uncrowded(segments, dmap, width)
         if not keep.all():
             segments = segments[keep]
             measured = meter.densities_of(meter.inside_all(segments), width)
@@ -648,7 +648,7 @@ class InfillPattern:
         points = np.concatenate(all_points) if all_points else np.zeros((0, 2))
         triangles = np.concatenate(all_triangles) if all_triangles else np.zeros((0, 3), np.intp)
         segments = np.concatenate(all_segments) if all_segments else np.zeros((0, 2, 2))
-        segments = segments[uncrowded_edges(segments, _shortest_edges(segments, dmap, width))]
+        segments = segments[_uncrowded(segments, dmap, width)]
         measured = [measured_density(segments, z, width) for z in dmap.zones(area)]
         return cls(segments, points, triangles, area, dmap, width, "paper", calibration, measured)
 
@@ -706,8 +706,9 @@ def _raster_meter(area, dmap: DensityMap, width: float):
 
     The zones are measured whole inside `area` (the infill area), border
     bands included: a region prints its density over all of itself, the
-    band where the pattern changes included.  The cell is `_CELL` line widths, larger when the footprint's box would
-    need more than `_MAX_CELLS` cells.  None (measure exactly, `_ZoneMeter`)
+    band where the pattern changes included.  The cell is `_CELL` line
+    widths, larger when the footprint's box would need more than
+    `_MAX_CELLS` cells.  None (measure exactly, `_ZoneMeter`)
     when fewer than two zones have cells (a single zone is calibrated to a
     tighter tolerance), or when the cell grew wider than a line and a zone
     has under `_FEW_CELLS` cells.
@@ -1008,6 +1009,11 @@ def _inside_lengths(edges, segments, meter, known: dict) -> np.ndarray:
 def _edge_keys(edges: np.ndarray) -> np.ndarray:
     """One int64 per edge (e, 2) of vertex indices, ordered as the rows are (lexicographically)."""
     return edges[:, 0].astype(np.int64) * (1 << 32) + edges[:, 1]
+
+
+def _uncrowded(segments: np.ndarray, dmap: DensityMap, width: float) -> np.ndarray:
+    """`uncrowded_edges` of segments (k, 2, 2) with the shortest edge a quarter of the local spacing: keep mask (k,)."""
+    return uncrowded_edges(segments, _shortest_edges(segments, dmap, width))
 
 
 def _shortest_edges(segments: np.ndarray, dmap: DensityMap, width: float) -> np.ndarray:

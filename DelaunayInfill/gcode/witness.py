@@ -144,7 +144,12 @@ def kd_tree(points: np.ndarray) -> cKDTree:
 
 
 def _all_near(tree: cKDTree, points: np.ndarray, group: np.ndarray, limit: float) -> bool:
-    """Whether every point lies within `limit` of a point of `tree` (as querying each would say).
+    """Whether every point lies within `limit` of a point of `tree` (see `_near_in_groups`)."""
+    return bool(_near_in_groups(tree, points, group, limit).all())
+
+
+def _near_in_groups(tree: cKDTree, points: np.ndarray, group: np.ndarray, limit: float) -> np.ndarray:
+    """Whether each point lies within `limit` of a point of `tree`, shape (p,): as querying each would say.
 
     `group` (shape (p,), int, each group's points consecutive) gathers neighbouring points: a group whose middle
     (of its bounding box) lies within `limit` less the group's radius of a tree point has all its
@@ -152,7 +157,7 @@ def _all_near(tree: cKDTree, points: np.ndarray, group: np.ndarray, limit: float
     groups are queried one by one.
     """
     if len(points) == 0:
-        return True
+        return np.zeros(0, dtype=bool)
     first = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
     lo = np.minimum.reduceat(points, first, axis=0)
     hi = np.maximum.reduceat(points, first, axis=0)
@@ -160,11 +165,11 @@ def _all_near(tree: cKDTree, points: np.ndarray, group: np.ndarray, limit: float
     sizes = np.diff(np.r_[first, len(points)])
     spread = np.hypot(*(points - np.repeat(middle, sizes, axis=0)).T)
     reach = np.maximum.reduceat(spread, first)
-    answered = tree.query(middle, distance_upper_bound=limit)[0] + reach <= limit
-    if answered.all():
-        return True
-    rest = points[~np.repeat(answered, sizes)]
-    return bool((tree.query(rest, distance_upper_bound=limit)[0] <= limit).all())
+    near = np.repeat(tree.query(middle, distance_upper_bound=limit)[0] + reach <= limit, sizes)
+    todo = np.flatnonzero(~near)
+    if len(todo):
+        near[todo] = tree.query(points[todo], distance_upper_bound=limit)[0] <= limit
+    return near
 
 
 def kept_cura_pieces(
@@ -303,10 +308,8 @@ def _near(tree, points: np.ndarray, rows: np.ndarray, reach: float, groups: tupl
     """Whether ``points[rows]`` lie within `reach` of a point of `tree`, shape (len(rows),).
 
     With `groups` (see `_uncovered`), consecutive rows along one segment are taken in runs of up to
-    `reach` / 2 mm: a run whose middle lies within `reach` less its half-length of a tree point has
-    all its points within `reach` of that point, which answers the run with one query (the usual
-    case: new infill a few millimetres away everywhere).  Only the other runs' points are queried
-    one by one.  The answer is the same as querying every point.
+    `reach` / 2 mm, each answered at once where it can be (`_near_in_groups`; the usual case: new
+    infill a few millimetres away everywhere).  The answer is the same as querying every point.
     """
     if groups is None or len(rows) < 64:
         return tree.query(points[rows], distance_upper_bound=reach)[0] <= reach
@@ -317,16 +320,7 @@ def _near(tree, points: np.ndarray, rows: np.ndarray, reach: float, groups: tupl
     # a run: consecutive rows of one segment in one window of `per_run` steps
     new_run = np.ones(len(rows), dtype=bool)
     new_run[1:] = (s[1:] != s[:-1]) | (run_of[1:] != run_of[:-1]) | (rows[1:] != rows[:-1] + 1)
-    first = np.flatnonzero(new_run)
-    last = np.r_[first[1:], len(rows)] - 1
-    middle = (points[rows[first]] + points[rows[last]]) / 2
-    half = np.hypot(*(points[rows[last]] - points[rows[first]]).T) / 2
-    whole = tree.query(middle, distance_upper_bound=reach)[0] + half <= reach
-    near = np.repeat(whole, last - first + 1)
-    todo = np.flatnonzero(~near)
-    if len(todo):
-        near[todo] = tree.query(points[rows[todo]], distance_upper_bound=reach)[0] <= reach
-    return near
+    return _near_in_groups(tree, points[rows], np.cumsum(new_run), reach)
 
 
 def _long_paths(paths: list[np.ndarray], min_length: float) -> list[np.ndarray]:

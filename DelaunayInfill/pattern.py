@@ -517,6 +517,7 @@ class InfillPattern:
         scale_limit = _scale_limit(area, reach)
         bracket = np.array([0.0, np.inf])  # single zone: factors known to print too sparse / too dense
         best = None
+        fixed = 0  # how many of the first samples lie on a lattice
         for iteration in range(1, _MAX_ITERATIONS + 1):
             scaled = dmap.with_densities(targets * factors)
 
@@ -528,7 +529,8 @@ class InfillPattern:
             # when it made one.
             growing = None
             if not single and calibration == "measured" and sampler in ("fast", "lattice") and not relax:
-                points, qhull = sample_triangulated(sampling_area, radius_fn, seed=seed, lattice=sampler == "lattice")
+                points, qhull, fixed = sample_triangulated(sampling_area, radius_fn, seed=seed,
+                                                           lattice=sampler == "lattice")
                 growing = GrowingDelaunay(points, qhull) if qhull is not None else _growing_delaunay(points)
             else:
                 fixed = 0  # relaxation leaves lattice points where they are (they are the regular part)
@@ -553,7 +555,7 @@ class InfillPattern:
             error = np.where(small & (measured > targets), 0.25 * error, error)
             worst = float(np.nanmax(np.where(settled, error, 0.0))) if len(error) else 0.0
             if best is None or worst < best[0]:
-                best = (worst, points, triangles, segments, measured, iteration, edges, inside, growing)
+                best = (worst, points, triangles, segments, measured, iteration, edges, inside, growing, fixed)
             if calibration == "paper" or worst <= (_TOLERANCE if single else _LOOP_TOLERANCE):
                 break
             ok = settled & np.isfinite(measured) & (measured > 0)
@@ -584,7 +586,7 @@ class InfillPattern:
             # full steps would oscillate; zones that fall short take full steps
             # up, since what ends up too dense can be thinned afterwards.
             factors = factors * np.where(small & (step > 1.0), step, np.sqrt(step))
-        worst, points, triangles, segments, measured, iteration, edges, inside, growing = best
+        worst, points, triangles, segments, measured, iteration, edges, inside, growing, fixed = best
         if single and worst > _TOLERANCE / 4:
             points, segments, measured = _fine_tune_scale(points, edges, meter, targets, measured, width,
                                                           scale_limit, area)
@@ -596,7 +598,7 @@ class InfillPattern:
             known = {"keys": _edge_keys(edges), "values": inside}
             points, triangles, segments, measured = _balance_zones(
                 points, triangles, meter, targets, width, off, known=known, growing=growing,
-                limit=lambda segs: _uncrowded(segs, dmap, width))
+                limit=lambda segs: _uncrowded(segs, dmap, width), fixed=fixed)
         keep = _uncrowded(segments, dmap, width)
         if not keep.all():
             segments = segments[keep]
@@ -811,7 +813,7 @@ def _fine_tune_scale(points, edges, meter, targets, measured, width, limit, area
 
 
 def _balance_zones(points, triangles, meter, targets, width, small, rounds: int = 12, known=None, growing=None,
-                   limit=None):
+                   limit=None, fixed: int = 0):
     """Bring zones that calibration cannot reach to their targets.
 
     A zone smaller than about two of its own radii cannot reach its target in
@@ -828,7 +830,7 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
     `_RasterMeter`) holds the zones and measures them; `known` (see
     `_inside_lengths`) may hold the inside lengths of the triangles' edges
     already; `growing` (`GrowingDelaunay`), a triangulation of `points` to
-    go on from; `limit`, passed to `_thin_dense_zones`.
+    go on from; `limit` and `fixed`, passed to `_thin_dense_zones`.
 
     Returns
     -------
@@ -838,7 +840,7 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
     # `growing`: qhull's triangulation, points added round by round
     best = None  # (largest shortfall, round, points, triangles, segments, measured) of the best round
     for turn in range(rounds):
-        segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known, limit)
+        segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known, limit, fixed)
         short, shortfall = _shortfall(measured, targets, small)
         if best is None or shortfall < best[0]:
             best = (shortfall, turn, points, triangles, segments, measured)
@@ -884,7 +886,7 @@ def _balance_zones(points, triangles, meter, targets, width, small, rounds: int 
         if triangles is None:
             triangles = delaunay_triangles(points)
     else:
-        segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known, limit)
+        segments, measured = _thin_dense_zones(points, triangles, meter, targets, width, small, known, limit, fixed)
         if best is None or _shortfall(measured, targets, small)[1] < best[0]:
             return points, triangles, segments, measured
     _, _, points, triangles, segments, measured = best
@@ -905,7 +907,7 @@ def _growing_delaunay(points):
         return None
 
 
-def _thin_dense_zones(points, triangles, meter, targets, width, small, known=None, limit=None):
+def _thin_dense_zones(points, triangles, meter, targets, width, small, known=None, limit=None, fixed: int = 0):
     """Leave out edges in zones that print denser than their target.
 
     A zone smaller than about two of its own radii cannot reach a low target
@@ -917,7 +919,9 @@ def _thin_dense_zones(points, triangles, meter, targets, width, small, known=Non
     `known` caches the edges' inside lengths between calls on the same
     points (more appended), so only new edges are measured; `limit`
     (segments (e, 2, 2) -> bool (e,)), the edges kept before any thinning
-    (`uncrowded_edges`).
+    (`uncrowded_edges`); `fixed`, how many of the first points lie on a
+    lattice: edges between two of them are left out last (a lattice with a
+    diagonal missing is a grid of rhombi, far less stiff per gram).
 
     Returns
     -------
@@ -957,7 +961,8 @@ def _thin_dense_zones(points, triangles, meter, targets, width, small, known=Non
         if excess <= 0:
             continue
         candidates = np.flatnonzero(keep & (inside >= 0.5 * length))
-        candidates = candidates[np.argsort(-length[candidates])]
+        on_lattice = (edges[candidates] < fixed).all(axis=1)
+        candidates = candidates[np.lexsort((-length[candidates], on_lattice))]
         ends, sides = edges[candidates].tolist(), owners[candidates].tolist()
         pieces = inside[candidates].tolist()
         excess = float(excess)

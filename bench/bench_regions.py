@@ -12,18 +12,30 @@ with shapely:
   part shorter than a quarter of the local spacing (the triangular lattice's side 2 sqrt(3) w / d at
   the denser end's density).
 
+A second table gives the **stiffness per region**: a 100 x 100 mm part with one square region
+(30 or 36 mm), the frame model of `bench/stiffness.py` (rigid joints) in a window exactly over the
+region (its border band inside), and in a window of the same size beside it on the part's side
+(touching the border), each as C_min / rho against a uniform pattern of that side's density in the
+same window with the same seed.
+
+With ``--ideal`` a third table measures the same windows over the best junction two lattices can
+have (`ideal_junction`: each density's exact lattice right up to the border, nothing between; the
+densities are then whatever the lattices print there): what any sampler could reach at most.
+
 Targets (issue 15): every whole region within 2 points for regions two of their own spacings
-across and more; no node over 8 edges; no short edge.
+across and more; no node over 8 edges; no short edge; each region's C_min / rho at least 0.95 of a
+uniform pattern of its density.
 
 Usage::
 
-    python3 bench/bench_regions.py [--seeds 5]
+    python3 bench/bench_regions.py [--seeds 5] [--ideal]
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 
@@ -32,6 +44,9 @@ from shapely.geometry import MultiLineString, Point, box
 
 from DelaunayInfill.figures import star_polygon, star_regions
 from DelaunayInfill.pattern import InfillPattern
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from stiffness import stiffness, triangular_lattice  # noqa: E402  (bench/stiffness.py, beside this file)
 
 WIDTH = 0.4  # mm
 PART = box(0, 0, 80, 80)
@@ -115,11 +130,111 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+STIFFNESS_PART = box(0, 0, 100, 100)
+STIFFNESS_CASES = {
+    # name: (base density, region density, region side mm); the region is centred on the part
+    "60 % region in 20 %": (0.2, 0.6, 30.0),
+    "20 % region in 60 %": (0.6, 0.2, 30.0),
+    "30 % region in 20 %": (0.2, 0.3, 30.0),
+    "40 % region in 10 %": (0.1, 0.4, 36.0),
+    "10 % region in 40 %": (0.4, 0.1, 36.0),
+}
+
+
+def run_stiffness(seeds: int) -> list[dict]:
+    """C_min / rho over the region and beside it, each against a uniform pattern of its density."""
+    centre = (50.0, 50.0)
+    rows = []
+    for name, (base, inner, side) in STIFFNESS_CASES.items():
+        region = box(50 - side / 2, 50 - side / 2, 50 + side / 2, 50 + side / 2)
+        beside = (50.0, 50.0 - side)  # the window below the region, its top edge on the border
+        for seed in range(seeds):
+            def uniform(d, seed=seed):
+                return InfillPattern.build(STIFFNESS_PART, d, WIDTH, seed=seed).clip(STIFFNESS_PART).segments
+            lines = InfillPattern.build(STIFFNESS_PART, base, WIDTH, regions=[(region, inner)],
+                                        seed=seed).clip(STIFFNESS_PART).segments
+            over = stiffness(lines, WIDTH, window=side, centre=centre)
+            out = stiffness(lines, WIDTH, window=side, centre=beside)
+            rows.append({
+                "case": name, "seed": seed, "rho": over.rho,
+                "region": over.c_min / stiffness(uniform(inner), WIDTH, window=side, centre=centre).c_min,
+                "beside": out.c_min / stiffness(uniform(base), WIDTH, window=side, centre=beside).c_min,
+            })
+    return rows
+
+
+def format_stiffness(rows: list[dict]) -> str:
+    out = ["| case | seeds | window over the region: C_min/rho vs uniform (mean, min-max) | its density (%) "
+           "| window beside it: vs uniform (mean, min-max) |", "|---|---:|---:|---:|---:|"]
+    for name in STIFFNESS_CASES:
+        mine = [r for r in rows if r["case"] == name]
+        over = [r["region"] for r in mine]
+        out_ = [r["beside"] for r in mine]
+        out.append(f"| {name} | {len(mine)} | {np.mean(over):.3f} ({min(over):.3f}-{max(over):.3f}) | "
+                   f"{100 * np.mean([r['rho'] for r in mine]):.1f} | {np.mean(out_):.3f} ({min(out_):.3f}-{max(out_):.3f}) |")
+    worst = min(min(r["region"], r["beside"]) for r in rows)
+    out.append("")
+    out.append(f"weakest region or side against a uniform pattern of its density: {worst:.3f} (target >= 0.95)")
+    return "\n".join(out)
+
+
+def ideal_junction(base: float, inner: float, side: float, angle: float) -> np.ndarray:
+    """The best junction a lattice pattern can have: each density's exact lattice (side 2 sqrt(3) w / d,
+    one orientation, one origin: at ratios 3 and 4 the sparser lattice is a subset of the denser) right
+    up to the region's border, no band of other samples, Delaunay across.  Segments (k, 2, 2)."""
+    from scipy.spatial import Delaunay
+
+    from DelaunayInfill.geometry import contains_xy
+
+    region = box(50 - side / 2, 50 - side / 2, 50 + side / 2, 50 + side / 2)
+    points = []
+    for density, inside in ((inner, True), (base, False)):
+        lattice = triangular_lattice(2.0 * math.sqrt(3.0) * WIDTH / density, 110.0, angle)
+        nodes = np.unique(np.round(lattice.reshape(-1, 2), 7), axis=0)
+        nodes = nodes[(np.abs(nodes - 50.0) <= 50.0).all(axis=1)]
+        points.append(nodes[contains_xy(region, nodes[:, 0], nodes[:, 1]) == inside])
+    points = np.unique(np.round(np.concatenate(points), 7), axis=0)
+    tri = Delaunay(points).simplices
+    edges = np.unique(np.sort(np.concatenate((tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]])), axis=1), axis=0)
+    return points[edges]
+
+
+def run_ideal(angles=(0.1, 0.4, 0.7)) -> list[dict]:
+    """`ideal_junction` measured as `run_stiffness` measures the pattern (three lattice turns)."""
+    rows = []
+    for name, (base, inner, side) in STIFFNESS_CASES.items():
+        for angle in angles:
+            lines = ideal_junction(base, inner, side, angle)
+            uniform = triangular_lattice(2.0 * math.sqrt(3.0) * WIDTH / inner, 110.0, angle)
+            over = stiffness(lines, WIDTH, window=side, centre=(50.0, 50.0))
+            rows.append({"case": name, "seed": angle, "rho": over.rho, "region": over.c_min / stiffness(
+                uniform, WIDTH, window=side, centre=(50.0, 50.0)).c_min, "beside": float("nan")})
+    return rows
+
+
+def format_ideal(rows: list[dict]) -> str:
+    out = ["| case | turns | ideal junction, window over the region: C_min/rho vs uniform (mean, min-max) "
+           "| its density (%) |", "|---|---:|---:|---:|"]
+    for name in STIFFNESS_CASES:
+        over = [r["region"] for r in rows if r["case"] == name]
+        rho = [r["rho"] for r in rows if r["case"] == name]
+        out.append(f"| {name} | {len(over)} | {np.mean(over):.3f} ({min(over):.3f}-{max(over):.3f}) "
+                   f"| {100 * np.mean(rho):.1f} |")
+    return "\n".join(out)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=5, help="seeds per case (default 5)")
+    parser.add_argument("--ideal", action="store_true",
+                        help="also measure the ideal junction of two exact lattices (no band) the same way")
     args = parser.parse_args(argv)
     print(format_table(run(args.seeds)))
+    print()
+    print(format_stiffness(run_stiffness(args.seeds)))
+    if args.ideal:
+        print()
+        print(format_ideal(run_ideal()))
     return 0
 
 

@@ -47,7 +47,7 @@ import sys
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, identity
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
@@ -291,6 +291,9 @@ def stiffness(segments: np.ndarray, line_width: float, *, window: float = 30.0, 
     K = K.tocsr()
     if free.size:
         Kff = K[free][:, free].tocsc()
+        # A node on a dangling, unbraced chain (a mechanism) would make the solve singular: a spring
+        # of 1e-12 of the mean stiffness to ground holds it and changes nothing else measurably.
+        Kff = Kff + identity(len(free), format="csc") * (1e-12 * float(Kff.diagonal().mean()))
         Kfp = K[free][:, fixed]
         U[free] = splu(Kff).solve(-(Kfp @ U[fixed]))
     C = U.T @ (K @ U) / area

@@ -505,7 +505,7 @@ def test_balancing_keeps_its_best_round(monkeypatch):
     shortfalls = iter([0.02, 0.008, 0.012, 0.011, 0.001, 0.0])  # round 2 best, then no better twice
     rounds = []
 
-    def scripted(points, triangles, meter, targets, width, small, known=None, limit=None):
+    def scripted(points, triangles, meter, targets, width, small, known=None, limit=None, fixed=0):
         measured = list(targets)
         measured[3] = targets[3] - next(shortfalls)
         rounds.append(len(points))
@@ -571,3 +571,37 @@ def test_no_node_with_more_than_eight_edges_and_no_short_edge(case, seed):
     spacing = 2.0 * np.sqrt(3.0) * 0.4 / density
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
     assert (length[both_inside] >= 0.25 * spacing[both_inside]).all()
+
+
+def test_thinning_leaves_a_lattice_whole_while_other_edges_can_go():
+    """A zone printing too dense is thinned by the edges that are not between two lattice points
+    first (a lattice missing diagonals is a grid of rhombi: far less stiff per gram); only when
+    those are not enough does the lattice lose edges.  Without the preference the longest edges
+    go first, and the lattice's (the longest here) would."""
+    from DelaunayInfill.pattern import _thin_dense_zones, _ZoneMeter
+    from DelaunayInfill.sampling import lattice_points
+    from DelaunayInfill.triangulation import delaunay_triangles, unique_edges
+
+    zone = box(0, 0, 30, 30)
+    lattice = lattice_points(zone.buffer(-2.5), 6.0, seed=1)
+    ring = zone.buffer(-1.0).exterior  # a band of closer samples along the border, as between two lattices
+    extras = np.array([ring.interpolate(t).coords[0] for t in np.arange(0.0, ring.length, 1.5)])
+    points = np.concatenate((lattice, extras))
+    triangles = delaunay_triangles(points)
+    edges = unique_edges(triangles)
+    both = (edges < len(lattice)).all(axis=1)
+    lattice_edges = {tuple(e) for e in np.sort(edges[both], axis=1).tolist()}
+    meter = _ZoneMeter([zone])
+    full = meter.densities(points[edges], 0.4)[0]
+    target = full * 0.9  # a tenth too dense: the other edges can make that up
+    segments, measured = _thin_dense_zones(points, triangles, meter, [target], 0.4, np.array([True]),
+                                           fixed=len(lattice))
+    kept = {tuple(sorted(map(tuple, np.round(s, 9).tolist()))) for s in segments}
+    lattice_kept = sum(tuple(sorted(map(tuple, np.round(points[list(e)], 9).tolist()))) in kept for e in lattice_edges)
+    assert measured[0] == pytest.approx(target, abs=0.01)
+    assert lattice_kept == len(lattice_edges)
+    # without knowing the lattice, some of its edges go
+    segments, _ = _thin_dense_zones(points, triangles, meter, [target], 0.4, np.array([True]))
+    kept = {tuple(sorted(map(tuple, np.round(s, 9).tolist()))) for s in segments}
+    assert sum(tuple(sorted(map(tuple, np.round(points[list(e)], 9).tolist()))) in kept for e in lattice_edges) \
+        < len(lattice_edges)

@@ -83,27 +83,37 @@ def _open_holes(polygon: Polygon) -> list[Polygon]:
 
 
 def _best_diagonal(polygon: Polygon) -> LineString | None:
+    """The diagonal from a reflex vertex to split along, None if none lies inside.
+
+    Candidates ranked by (to another reflex vertex 0, resolving the reflex angle
+    1, else 2; length), ties in ring order; the best whose line lies inside the
+    polygon is taken.  All candidates are ranked at once: on a curved outline
+    (hundreds of vertices, half of them reflex) the containment test runs only
+    until the first that holds.
+    """
     ring = _open_ring(polygon)
     m = len(ring)
     turn = cross_turn(ring)
     scale = max(1.0, float(np.ptp(ring, axis=0).max())) ** 2
     reflex = turn < -_TOL * scale
-    best = None
-    for v in np.flatnonzero(reflex):
-        a, b = ring[(v - 1) % m], ring[(v + 1) % m]
-        for u in range(m):
-            if u in (v, (v - 1) % m, (v + 1) % m):
-                continue
-            d = ring[u] - ring[v]
-            length = float(np.hypot(*d))
-            resolves = (b - ring[v])[0] * d[1] - (b - ring[v])[1] * d[0] >= 0 and d[0] * (a - ring[v])[1] - d[1] * (a - ring[v])[0] >= 0
-            score = (0 if reflex[u] else 1 if resolves else 2, length)
-            if best is not None and score >= best[0]:
-                continue
-            line = LineString([ring[v], ring[u]])
-            if polygon.contains(line):
-                best = (score, line)
-    return None if best is None else best[1]
+    vs = np.flatnonzero(reflex)
+    if not vs.size:
+        return None
+    v = np.repeat(vs, m)  # (k m,): every reflex vertex against every vertex, in ring order
+    u = np.tile(np.arange(m), vs.size)
+    ok = (u != v) & (u != (v - 1) % m) & (u != (v + 1) % m)
+    v, u = v[ok], u[ok]
+    d = ring[u] - ring[v]
+    to_next = ring[(v + 1) % m] - ring[v]
+    to_prev = ring[(v - 1) % m] - ring[v]
+    resolves = (to_next[:, 0] * d[:, 1] - to_next[:, 1] * d[:, 0] >= 0) & (d[:, 0] * to_prev[:, 1] - d[:, 1] * to_prev[:, 0] >= 0)
+    rank = np.where(reflex[u], 0, np.where(resolves, 1, 2))
+    order = np.lexsort((np.hypot(d[:, 0], d[:, 1]), rank))  # stable: ties keep ring order
+    for k in order.tolist():
+        line = LineString([ring[v[k]], ring[u[k]]])
+        if polygon.contains(line):
+            return line
+    return None
 
 
 def decompose_convex(region) -> list[Polygon]:

@@ -614,8 +614,7 @@ class InfillPattern:
                     continue  # a sliver between zones: no line fits in it
                 parts.extend((convex, zone_index) for convex in decompose_convex(polygon))
         targets = dmap.densities
-        all_points, all_triangles, all_segments = [], [], []
-        offset = 0
+        tried, printed_areas = [], []  # per part: its samplings [(printed mm, points, triangles, segments)]
         for part_index, (part, zone_index) in enumerate(parts):
             target = targets[zone_index]
             radius = paper_radius(target, width) if calibration == "paper" else KAPPA * width / target
@@ -625,8 +624,8 @@ class InfillPattern:
             infill_area = part.area if kept is None else kept.area
             # (clipped lines come and go with the samples: half a point is as close as a resampling gets)
             tolerance = _TOLERANCE if kept is None else max(_TOLERANCE, _PRINTED_TOLERANCE)
-            best = None
-            # a part a few samples across is as dense as its samples fall: four tries, the closest kept
+            samplings = []
+            # a part a few samples across is as dense as its samples fall: four tries
             tries = _MAX_ITERATIONS if part.area > 30.0 * radius * radius else 4
             for _ in range(tries if calibration == "measured" else 1):
                 points = sample_poisson_disk(part, radius, seed=seed + part_index, method=sampler)
@@ -635,14 +634,21 @@ class InfillPattern:
                 triangles = delaunay_triangles(points)
                 segments = points[unique_edges(triangles)] if len(triangles) else np.zeros((0, 2, 2))
                 printed = segments if kept is None else clip_segments(segments, kept) if not kept.is_empty else segments[:0]
-                got = segment_length(printed) * width / infill_area if infill_area > 0 else 0.0
-                if best is None or abs(got - target) < best[0]:
-                    best = (abs(got - target), points, triangles, segments)
+                length = segment_length(printed)
+                samplings.append((length, points, triangles, segments))
+                got = length * width / infill_area if infill_area > 0 else 0.0
                 if calibration == "paper" or abs(got - target) <= tolerance or (got <= 0 and kept is None):
                     break
                 # (nothing printed of a small part: halve the radius, its lines come inside)
                 radius *= float(np.clip(got / target, 0.5, 2.0)) if got > 0 else 0.5
-            _, points, triangles, segments = best
+            tried.append(samplings)
+            printed_areas.append(infill_area)
+        zone_of = np.array([zone_index for _, zone_index in parts], dtype=np.intp)
+        chosen = _paper_choices(tried, zone_of, np.asarray(printed_areas), np.asarray(targets), width)
+        all_points, all_triangles, all_segments = [], [], []
+        offset = 0
+        for samplings, choice in zip(tried, chosen):
+            _, points, triangles, segments = samplings[choice]
             all_points.append(points)
             all_triangles.append(triangles + offset)
             all_segments.append(segments)
@@ -810,6 +816,53 @@ def _fine_tune_scale(points, edges, meter, targets, measured, width, limit, area
     scaled = center + (points - center) * scale
     measured = [float(density) if k == zone_index else float("nan") for k in range(len(meter.areas))]
     return scaled, scaled[edges], measured
+
+
+def _paper_choices(tried: list, zone_of: np.ndarray, areas: np.ndarray, targets: np.ndarray,
+                   width: float) -> list[int]:
+    """Which sampling of each convex part the paper layout keeps: its zone's whole printed density closest.
+
+    Each part's closest sampling first; then, zone by zone, the one change of one
+    part's sampling that brings the zone's printed length nearest its target,
+    while one does (a small part prints in jumps of several points; over a
+    zone of many parts the jumps are traded against each other).
+
+    Parameters
+    ----------
+    tried : list of list of (float, ...)
+        Per part, its samplings; each starts with its printed length, mm.
+    zone_of : ndarray of int, shape (parts,)
+    areas : ndarray, shape (parts,)
+        Each part's printed area, mm^2.
+    targets : ndarray, shape (zones,)
+        Density per zone, a fraction.
+    width : float
+        Line width, mm.
+
+    Returns
+    -------
+    list of int
+        The index into each part's samplings.
+    """
+    lengths = [np.array([t[0] for t in samplings]) for samplings in tried]
+    wanted = targets[zone_of] * areas / width  # mm of line each part would print at its target
+    chosen = [int(np.argmin(np.abs(ls - w))) for ls, w in zip(lengths, wanted)]
+    for zone in np.unique(zone_of).tolist():
+        members = np.flatnonzero(zone_of == zone).tolist()
+        goal = float(wanted[members].sum())
+        total = float(sum(lengths[i][chosen[i]] for i in members))
+        for _ in range(4 * len(members)):  # (each change makes the error smaller: this bounds the walk)
+            best = (abs(total - goal), None, None)
+            for i in members:
+                new_totals = total - lengths[i][chosen[i]] + lengths[i]
+                k = int(np.argmin(np.abs(new_totals - goal)))
+                if abs(new_totals[k] - goal) < best[0] - 1e-9:
+                    best = (abs(new_totals[k] - goal), i, k)
+            if best[1] is None:
+                break
+            total += lengths[best[1]][best[2]] - lengths[best[1]][chosen[best[1]]]
+            chosen[best[1]] = best[2]
+    return chosen
 
 
 def _balance_zones(points, triangles, meter, targets, width, small, rounds: int = 12, known=None, growing=None,

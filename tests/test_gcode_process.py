@@ -619,12 +619,15 @@ def test_the_paper_layout_prints_its_density_and_fails_no_layer(star, density):
     assert abs(base.measured - density) <= 0.02, report.format_table()
 
 
-def test_the_paper_layout_decomposes_the_h_bracket_with_its_modifier(bracket):
+@pytest.mark.parametrize("seed", [0, 2, 4])
+def test_the_paper_layout_decomposes_the_h_bracket_with_its_modifier(bracket, seed):
     """Every layer of the H-bracket with a box modifier used to fail (no diagonal at a reflex vertex of
     the modifier's cut: each one touched the border); the cut along a reflex vertex's edge does it.
-    Its many small convex parts, four samplings each, the closest kept: 18.0-19.8 % over seeds 0-3 (the
-    60 % box 57.3-61.0 %); two samplings each printed 18-25 %."""
-    _, report = process_gcode(bracket, ProcessSettings(layout="paper", density=0.2))
+    Its many small convex parts, four samplings each, print in jumps of several points each: the
+    samplings kept are chosen so that each zone's whole is closest to its target (issue 15: within 2
+    points).  With each part's closest sampling instead, seed 2 printed 17.5 % for 20 %, seed 3 the
+    60 % box 61.7 %."""
+    _, report = process_gcode(bracket, ProcessSettings(layout="paper", density=0.2, seed=seed))
     assert not report.failed_layers, report.failure_messages[:2]
     for region in report.regions:
-        assert abs(region.measured - region.target) <= 0.02 + 0.05 * region.target, report.format_table()
+        assert abs(region.measured - region.target) <= 0.02, report.format_table()

@@ -139,8 +139,26 @@ def family_spacings(fill: np.ndarray, line_width: float, quantile: float = 0.5) 
         gaps = gaps[gaps > 0.5 * line_width]
         if gaps.size < 2:
             return None
-        spacings.append(median_of(gaps) if quantile == 0.5 else _quantile(gaps, quantile))
+        spacings.append(_grouped_spacing(gaps, line_width) if quantile == 0.5 else _quantile(gaps, quantile))
     return spacings
+
+
+def _grouped_spacing(gaps: np.ndarray, line_width: float) -> float:
+    """A family's spacing from the gaps (mm) between its neighbouring lines: their median, or for lines
+    in groups (Cura's infill line multiplier m prints each line m times a line width apart) the group's
+    pitch over m, so that ``line_width / spacing`` is still the family's share of the density.
+
+    Groups show as gaps of about a line width (m - 1 per group) among wide ones (one per group); the
+    median alone would read a pair's own gap as the spacing (a 40 % grid of pairs as 200 %).
+    """
+    narrow = gaps <= 1.25 * line_width
+    n_narrow, n_wide = int(np.count_nonzero(narrow)), int(np.count_nonzero(~narrow))
+    if n_wide < 2 or n_narrow < 0.3 * n_wide:  # plain lines (or 100 %: every gap a line width)
+        return median_of(gaps)
+    # lines in a group: all the lines over the groups (one wide gap fewer than groups)
+    per_group = max(2, int(round((n_narrow + n_wide + 1) / (n_wide + 1))))
+    pitch = median_of(gaps[~narrow]) + (per_group - 1) * median_of(gaps[narrow])
+    return pitch / per_group
 
 
 def infill_density(fill: np.ndarray, line_width: float, area: float | None = None) -> float | None:

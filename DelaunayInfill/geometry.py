@@ -181,8 +181,17 @@ def boundary_segments(area: BaseGeometry) -> np.ndarray:
     ndarray, shape (k, 2, 2)
         Segment start and end points in mm.
     """
-    segs = []
-    for polygon in polygons_of(area):
+    polygons = polygons_of(area)
+    if SHAPELY2:
+        if not polygons:
+            return np.zeros((0, 2, 2))
+        # every ring's corners at once (exterior first, then the holes, polygon by polygon), each
+        # corner to the next of the same ring
+        xy, ring = shapely.get_coordinates(shapely.get_rings(np.array(polygons, dtype=object)), return_index=True)
+        same = ring[1:] == ring[:-1]
+        return np.stack([xy[:-1][same], xy[1:][same]], axis=1)
+    segs = []  # pragma: no cover - shapely 1.8
+    for polygon in polygons:
         for ring in rings_of(polygon):
             if len(ring) >= 2:
                 segs.append(np.stack([ring[:-1], ring[1:]], axis=1))

@@ -56,6 +56,7 @@ def split_segments(segments: np.ndarray, longest: float) -> tuple[np.ndarray, np
 _BOUNDARIES: dict[int, tuple] = {}  # id(area) -> (area, its boundary segments): areas are clipped against repeatedly
 _BRUTE_FORCE_PAIRS = 1024  # up to this many segment x boundary pairs, test them all (no sweep)
 _MAX_CANDIDATES = 4_000_000  # pairs the box sweep compares at most (beyond: pairs by distance)
+_BROADCAST_PAIRS = 250_000  # up to this many, every box against every box at once (no sweep)
 
 
 def _boundary_of(area) -> np.ndarray:
@@ -122,16 +123,32 @@ def clip_segments(segments: np.ndarray, area, *, return_index: bool = False):
     boundary = _boundary_of(area)
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
     longest = float(length.max()) if len(length) else 0.0
+    # Only the segments whose boxes meet the area's can have a piece inside it (the rest are left
+    # out before any work; the boundary is still split by the longest segment of all, as before).
+    s_lo, s_hi = np.minimum(segments[:, 0], segments[:, 1]), np.maximum(segments[:, 0], segments[:, 1])
+    x0, y0, x1, y1 = area.bounds
+    near = np.flatnonzero((s_lo[:, 0] <= x1) & (s_hi[:, 0] >= x0) & (s_lo[:, 1] <= y1) & (s_hi[:, 1] >= y0))
+    segments, length, s_lo, s_hi = segments[near], length[near], s_lo[near], s_hi[near]
     ia = np.zeros(0, np.intp)
     ta = np.zeros(0)
-    if len(boundary) and longest > 0:
+    if len(boundary) and longest > 0 and len(segments):
         boundary, _ = split_segments(boundary, max(longest, 1e-3))
         pairs = None
-        if len(segments) * len(boundary) <= _BRUTE_FORCE_PAIRS:
+        n_pairs = len(segments) * len(boundary)
+        if n_pairs <= _BRUTE_FORCE_PAIRS:
             # Few pairs: test them all.  Pairs the box sweep or the k-d trees would skip cannot
             # intersect, so the crossings (and the result) are the same.
             ia = np.repeat(np.arange(len(segments), dtype=np.intp), len(boundary))
             ib = np.tile(np.arange(len(boundary), dtype=np.intp), len(segments))
+        elif n_pairs <= _BROADCAST_PAIRS:
+            # Every segment's box against every piece's at once (the pairs the sweep finds, fewer calls)
+            margin = 1e-6 * max(1.0, longest)
+            a_lo, a_hi = s_lo - margin, s_hi + margin
+            b_lo = np.minimum(boundary[:, 0], boundary[:, 1])
+            b_hi = np.maximum(boundary[:, 0], boundary[:, 1])
+            meet = (a_lo[:, None, 0] <= b_hi[None, :, 0]) & (a_hi[:, None, 0] >= b_lo[None, :, 0])
+            meet &= (a_lo[:, None, 1] <= b_hi[None, :, 1]) & (a_hi[:, None, 1] >= b_lo[None, :, 1])
+            ia, ib = np.nonzero(meet)
         elif (pairs := _meeting_pairs(segments, length, boundary)) is not None:
             ia, ib = pairs
         else:  # a degenerate layout (pieces wide on both axes everywhere): pairs by distance
@@ -166,7 +183,7 @@ def clip_segments(segments: np.ndarray, area, *, return_index: bool = False):
     mid = 0.5 * (start + end)
     inside = contains_xy(area, mid[:, 0], mid[:, 1])
     pieces = np.stack([start[inside], end[inside]], axis=1)
-    return (pieces, sid[inside]) if return_index else pieces
+    return (pieces, near[sid[inside]]) if return_index else pieces
 
 
 def _vertex_ids(points: np.ndarray) -> tuple[np.ndarray, int]:

@@ -88,13 +88,13 @@ def runs_of(parse: LayerParse, mask: np.ndarray) -> list[np.ndarray]:
     x0, y0, x1, y1 = m["x0"][idx], m["y0"][idx], m["x1"][idx], m["y1"][idx]
     joined = np.zeros(idx.size, dtype=bool)
     joined[1:] = (idx[1:] == idx[:-1] + 1) & (np.abs(x0[1:] - x1[:-1]) < 1e-6) & (np.abs(y0[1:] - y1[:-1]) < 1e-6)
-    run_id = np.cumsum(~joined) - 1
     starts = np.flatnonzero(~joined)
     stops = np.r_[starts[1:], idx.size]
-    pts_start = np.column_stack([x0, y0])
-    pts_end = np.column_stack([x1, y1])
-    del run_id
-    return [np.vstack([pts_start[a:b], pts_end[b - 1 : b]]) for a, b in zip(starts, stops, strict=True)]
+    # every run's start points followed by its last end point, all runs in one array; a run is a slice of it
+    points = np.insert(np.column_stack([x0, y0]), stops, np.column_stack([x1[stops - 1], y1[stops - 1]]), axis=0)
+    first = starts + np.arange(len(starts))
+    last = stops + np.arange(1, len(stops) + 1)
+    return [points[a:b] for a, b in zip(first.tolist(), last.tolist())]
 
 
 def wall_rings(runs: list[np.ndarray], tolerance: float) -> list[np.ndarray]:

@@ -86,7 +86,8 @@ def _xy_words(paths: list[np.ndarray], cache: dict | None) -> list[str]:
     for path in paths:
         hit = cache.get(id(path)) if cache is not None else None
         if hit is None or hit[0] is not path:
-            words = [f"G1 X{x:.3f} Y{y:.3f}" for x, y in path[1:].tolist()]
+            # (one %-format for the whole path, split at its line breaks: as each point's f-string)
+            words = ("\nG1 X%.3f Y%.3f" * (len(path) - 1) % tuple(path[1:].ravel().tolist())).split("\n")[1:]
             if cache is not None:
                 if len(cache) > 20000:
                     cache.clear()
@@ -397,7 +398,13 @@ class _Writer:
                 e_vals = de
             else:
                 e_vals = np.repeat(bases, counts) + (cum[1:] - np.repeat(cum[tpl.count_starts], counts))
-            words = [f"{w} E{e:.5f}" for w, e in zip(tpl.xy, e_vals.tolist(), strict=True)]
+            if len(e_vals) != len(tpl.xy):
+                raise ValueError("a block's E values and XY words differ in number")
+            flat: list = [None] * (2 * len(tpl.xy))
+            flat[::2] = tpl.xy
+            flat[1::2] = e_vals.tolist()
+            # (one %-format for every line, split at its line breaks: as each line's f-string "{w} E{e:.5f}")
+            words = ("\n%s E%.5f" * len(tpl.xy) % tuple(flat)).split("\n")[1:]
             count_list = tpl.count_list
             out: list[str] = lines[: marks[0]]
             at = 0

@@ -71,7 +71,6 @@ __all__ = [
 ]
 
 _TIME_ELAPSED = re.compile(r"^;TIME_ELAPSED:(-?[\d.]+)", re.M)
-_MESH_LINE = re.compile(r"^;MESH:(.*?)\s*$", re.M)
 _M204 = re.compile(r"^M204 [^\n;]*?S(\d+\.?\d*)", re.M)
 _EXTRUDING_XY = re.compile(r"^G1 (?:F[\d.]+ )?X(-?[\d.]+) Y(-?[\d.]+) E", re.M)
 _DEFAULT_LINE_WIDTH = 0.4
@@ -100,9 +99,10 @@ class Survey:
 
     def add(self, text: str, index: int) -> None:
         if ";MESH:" in text:
-            self.meshes.update(name for name in _MESH_LINE.findall(text) if name != "NONMESH")
+            heads = _mesh_heads(text)
+            self.meshes.update(name for _, _, name in heads if name != "NONMESH")
             if ";TYPE:WALL-OUTER" in text:
-                self._add_extents(text)
+                self._add_extents(text, heads)
         if index == 0:
             self.first_chunk = text
         self.last_chunk = text
@@ -118,14 +118,12 @@ class Survey:
             if m:
                 self.last_time_elapsed = float(m.group(1))
 
-    def _add_extents(self, text: str) -> None:
-        heads = list(_MESH_LINE.finditer(text))
-        for k, head in enumerate(heads):
-            name = head.group(1)
+    def _add_extents(self, text: str, heads: list) -> None:
+        for k, (_, head_end, name) in enumerate(heads):
             if name == "NONMESH":
                 continue
-            end = heads[k + 1].start() if k + 1 < len(heads) else len(text)
-            at = text.find(";TYPE:WALL-OUTER", head.end(), end)
+            end = heads[k + 1][0] if k + 1 < len(heads) else len(text)
+            at = text.find(";TYPE:WALL-OUTER", head_end, end)
             while at >= 0:
                 stop = text.find(";TYPE:", at + 16, end)
                 stop = end if stop < 0 else stop
@@ -137,6 +135,25 @@ class Survey:
                     self.extents[name] = ([lo[0], lo[1], hi[0], hi[1]] if box is None else
                                           [min(box[0], lo[0]), min(box[1], lo[1]), max(box[2], hi[0]), max(box[3], hi[1])])
                 at = text.find(";TYPE:WALL-OUTER", stop, end)
+
+
+def _mesh_heads(text: str) -> list[tuple[int, int, str]]:
+    """The ``;MESH:`` lines of a chunk: (start, end of the line, the name without trailing space) each.
+
+    What ``^;MESH:(.*?)\\s*$`` finds (multi-line), found with `str.find` (a chunk has a few of them
+    among thousands of lines).
+    """
+    starts = [0] if text.startswith(";MESH:") else []
+    at = text.find("\n;MESH:")
+    while at >= 0:
+        starts.append(at + 1)
+        at = text.find("\n;MESH:", at + 7)
+    heads = []
+    for start in starts:
+        end = text.find("\n", start)
+        end = len(text) if end < 0 else end
+        heads.append((start, end, text[start + 6 : end].rstrip()))
+    return heads
 
 
 # ----------------------------------------------------------------------------- patterns
@@ -1220,8 +1237,15 @@ class _Run:
         hit = self.result_memo.get(id(result))
         if hit is None or hit[0] is not result or hit[3] != min_length:
             arrays = [np.asarray(p, dtype=float) for p in result.paths if len(p) >= 2]
-            lengths = [float(np.hypot(*np.diff(a, axis=0).T).sum()) for a in arrays]
-            kept = [a for a, n in zip(arrays, lengths, strict=True) if n >= min_length]
+            kept = arrays
+            if arrays and min_length > 0:
+                # every path's length at once: its steps' lengths summed (the steps between paths left out)
+                points = np.concatenate(arrays)
+                step = np.r_[np.hypot(*np.diff(points, axis=0).T), 0.0]
+                heads = np.cumsum([0] + [len(a) for a in arrays[:-1]])
+                step[heads[1:] - 1] = 0.0  # (the step from one path's end to the next path's start)
+                lengths = np.add.reduceat(step, heads)
+                kept = [a for a, n in zip(arrays, lengths.tolist(), strict=True) if n >= min_length]
             hit = (result, kept, {}, min_length)
             if len(self.result_memo) >= 16:
                 self.result_memo.pop(next(iter(self.result_memo)))

@@ -342,4 +342,7 @@ def _samples(paths: list[np.ndarray], step: float) -> np.ndarray:
     paths = [p for p in paths if len(p) >= 2]
     if not paths:
         return np.zeros((0, 2))
-    return sample_segments(np.concatenate([np.stack([p[:-1], p[1:]], axis=1) for p in paths]), step)
+    points = np.concatenate(paths)
+    steps = np.ones(len(points) - 1, dtype=bool)  # point i to i + 1, but from one path to the next
+    steps[np.cumsum([len(p) for p in paths[:-1]], dtype=np.int64) - 1] = False
+    return sample_segments(np.stack([points[:-1][steps], points[1:][steps]], axis=1), step)

@@ -844,25 +844,26 @@ def _paper_choices(tried: list, zone_of: np.ndarray, areas: np.ndarray, targets:
     list of int
         The index into each part's samplings.
     """
-    lengths = [np.array([t[0] for t in samplings]) for samplings in tried]
+    most = max((len(samplings) for samplings in tried), default=0)
+    lengths = np.full((len(tried), most), np.nan)  # (parts, tries) printed mm; NaN: no such try
+    for i, samplings in enumerate(tried):
+        lengths[i, : len(samplings)] = [t[0] for t in samplings]
     wanted = targets[zone_of] * areas / width  # mm of line each part would print at its target
-    chosen = [int(np.argmin(np.abs(ls - w))) for ls, w in zip(lengths, wanted)]
+    chosen = np.nanargmin(np.abs(lengths - wanted[:, None]), axis=1) if len(tried) else np.zeros(0, np.intp)
     for zone in np.unique(zone_of).tolist():
-        members = np.flatnonzero(zone_of == zone).tolist()
+        members = np.flatnonzero(zone_of == zone)
         goal = float(wanted[members].sum())
-        total = float(sum(lengths[i][chosen[i]] for i in members))
+        own = lengths[members]
         for _ in range(4 * len(members)):  # (each change makes the error smaller: this bounds the walk)
-            best = (abs(total - goal), None, None)
-            for i in members:
-                new_totals = total - lengths[i][chosen[i]] + lengths[i]
-                k = int(np.argmin(np.abs(new_totals - goal)))
-                if abs(new_totals[k] - goal) < best[0] - 1e-9:
-                    best = (abs(new_totals[k] - goal), i, k)
-            if best[1] is None:
+            current = own[np.arange(len(members)), chosen[members]]
+            total = float(current.sum())
+            # every part's every try in place of its current one: the zone's error, (members, tries)
+            error = np.abs(total - current[:, None] + own - goal)
+            flat = int(np.nanargmin(error))
+            if not error.flat[flat] < abs(total - goal) - 1e-9:
                 break
-            total += lengths[best[1]][best[2]] - lengths[best[1]][chosen[best[1]]]
-            chosen[best[1]] = best[2]
-    return chosen
+            chosen[members[flat // own.shape[1]]] = flat % own.shape[1]
+    return chosen.tolist()
 
 
 def _balance_zones(points, triangles, meter, targets, width, small, rounds: int = 12, known=None, growing=None,

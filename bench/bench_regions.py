@@ -6,19 +6,25 @@ with shapely:
 
 * **whole**: each region's density over all of itself, the band along its border included (line
   length inside x line width / area), and the rest of the part's;
-* **sparse side, 0-2 mm**: the density in the 2 mm of the sparser zone along the border (issue 15:
-  the change lies on the denser side, so this stays near the sparse density);
+* **sparse side, 0-2 mm**: the density in the 2 mm of the sparser zone along the border (a strip a
+  third of a sparse spacing wide: whether a lattice row falls in it decides most of this figure);
+* **across the border**: the density in bands one sparse spacing s = 2 sqrt(3) w / d_sparse wide (the
+  sparse lattice's side) on either side of the border, all along it: the sparse side's first band
+  [0, s) and the dense side's first band and the rest of the dense side beyond s.  Issue 15: the
+  transition lies on the denser side and is at most one sparse spacing wide, so the sparse side's
+  first band is at the sparse density and the dense side is at its density from s on (each within 2
+  points); the dense side's first band is where the change is;
 * **max edges per node** (nodes inside the part) and **short edges**: edges with both ends inside the
   part shorter than a quarter of the local spacing (the triangular lattice's side 2 sqrt(3) w / d at
   the denser end's density).
 
-A second table gives the **stiffness per region**: a 100 x 100 mm part with one square region
+A second table gives the density **across the border**; a third the **stiffness per region**: a 100 x 100 mm part with one square region
 (30 or 36 mm), the frame model of `bench/stiffness.py` (rigid joints) in a window exactly over the
 region (its border band inside), and in a window of the same size beside it on the part's side
 (touching the border), each as C_min / rho against a uniform pattern of that side's density in the
 same window with the same seed.
 
-With ``--ideal`` a third table measures the same windows over the best junction two lattices can
+With ``--ideal`` a fourth table measures the same windows over the best junction two lattices can
 have (`ideal_junction`: each density's exact lattice right up to the border, nothing between; the
 densities are then whatever the lattices print there): what any sampler could reach at most.
 
@@ -75,6 +81,21 @@ def sparse_side(part, base: float, region, region_density: float):
     return region.difference(region.buffer(-2.0))
 
 
+def border_bands(part, base: float, region, region_density: float) -> dict:
+    """Bands one sparse spacing wide along the region's border, inside the part shrunk by one spacing
+    (the part's own edge stays out of them): {"sparse 1-2", "sparse 0-1", "dense 0-1", "dense beyond 1"}."""
+    s = 2.0 * math.sqrt(3.0) * WIDTH / min(base, region_density)
+    inner = part.buffer(-s)
+    if region_density > base:  # dense inside the region: the sparse side is outside it
+        sparse_near, sparse_far = region.buffer(s).difference(region), region.buffer(2 * s).difference(region.buffer(s))
+        dense_near, dense_far = region.difference(region.buffer(-s)), region.buffer(-s)
+    else:
+        sparse_near, sparse_far = region.difference(region.buffer(-s)), region.buffer(-s).difference(region.buffer(-2 * s))
+        dense_near, dense_far = region.buffer(s).difference(region), part.difference(region.buffer(s))
+    bands = {"sparse 1-2": sparse_far, "sparse 0-1": sparse_near, "dense 0-1": dense_near, "dense beyond 1": dense_far}
+    return {k: v.intersection(inner) for k, v in bands.items()}
+
+
 def node_figures(pattern) -> tuple[int, int]:
     """(max edges at a node inside the part, edges inside it under a quarter of the local spacing)."""
     segments = pattern.segments
@@ -101,7 +122,15 @@ def run(seeds: int) -> list[dict]:
             region, region_density = regions[0]
             band = sparse_side(part, base, region, region_density) if len(regions) == 1 else None
             most, short = node_figures(pattern)
+            across = control = None
+            if band is not None:
+                bands = border_bands(part, base, region, region_density)
+                across = {k: 100 * density(printed, z) if z.area > 1.0 else float("nan") for k, z in bands.items()}
+                # the same band in a uniform pattern of the sparse density: how much a band this wide varies anyway
+                uniform = InfillPattern.build(part, min(base, region_density), WIDTH, seed=seed).clip(part).segments
+                control = 100 * density(uniform, bands["sparse 0-1"])
             rows.append({
+                "across": across, "control": control, "dense": 100 * max(base, region_density),
                 "case": name, "seed": seed, "worst_points": 100 * max(abs(e) for e in errors),
                 "errors": errors, "sparse_side": None if band is None else 100 * density(printed, band),
                 "sparse": 100 * min(base, region_density), "max_edges": most, "short": short, "ms": 1000 * seconds,
@@ -127,6 +156,35 @@ def format_table(rows: list[dict]) -> str:
     out.append(f"worst whole-region error over every case and seed: {worst:.2f} points (target <= 2); "
                f"max edges per node {max(r['max_edges'] for r in rows)} (target <= 8); "
                f"short edges {sum(r['short'] for r in rows)} (target 0)")
+    return "\n".join(out)
+
+
+def format_across(rows: list[dict]) -> str:
+    """The density across each single region's border in bands one sparse spacing wide (min-max over seeds)."""
+    keys = ("sparse 1-2", "sparse 0-1", "dense 0-1", "dense beyond 1")
+    out = ["| case | seeds | sparse side 1-2 spacings (%) | sparse side 0-1 spacing (%) | dense side 0-1 spacing (%) "
+           "| dense side beyond 1 spacing (%) | targets (%) | band on the denser side, at most one sparse spacing "
+           "| a uniform pattern of the sparse density, sparse side 0-1 spacing (%) |",
+           "|---|---:|---:|---:|---:|---:|---:|---|---:|"]
+    worst = 0.0
+    for name in CASES:
+        mine = [r for r in rows if r["case"] == name and r["across"] is not None]
+        if not mine:
+            continue
+        cells = []
+        for k in keys:
+            values = [r["across"][k] for r in mine if not math.isnan(r["across"][k])]
+            cells.append(f"{min(values):.1f}-{max(values):.1f}" if values else "-")
+        misses = [max(abs(r["across"]["sparse 0-1"] - r["sparse"]),
+                      0.0 if math.isnan(r["across"]["dense beyond 1"]) else abs(r["across"]["dense beyond 1"] - r["dense"]))
+                  for r in mine]
+        worst = max(worst, max(misses))
+        out.append(f"| {name} | {len(mine)} | " + " | ".join(cells) + f" | {mine[0]['sparse']:.0f} / {mine[0]['dense']:.0f} "
+                   f"| {'yes' if max(misses) <= 2.0 else 'no'} (worst {max(misses):.1f} points) "
+                   f"| {min(r['control'] for r in mine):.1f}-{max(r['control'] for r in mine):.1f} |")
+    out.append("")
+    out.append(f"worst of the sparse side's first spacing and the dense side beyond one spacing against their "
+               f"targets, every case and seed: {worst:.2f} points (target <= 2)")
     return "\n".join(out)
 
 
@@ -229,7 +287,10 @@ def main(argv=None) -> int:
     parser.add_argument("--ideal", action="store_true",
                         help="also measure the ideal junction of two exact lattices (no band) the same way")
     args = parser.parse_args(argv)
-    print(format_table(run(args.seeds)))
+    rows = run(args.seeds)
+    print(format_table(rows))
+    print()
+    print(format_across(rows))
     print()
     print(format_stiffness(run_stiffness(args.seeds)))
     if args.ideal:

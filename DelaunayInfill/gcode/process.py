@@ -372,6 +372,9 @@ def _split_empty_regions(regions: list) -> tuple[list, object, list]:
 
 
 # ----------------------------------------------------------------------------- the run
+_NOTHING_LEARNED = (None,) * 5
+
+
 @dataclass
 class _RegionTally:
     target: float
@@ -379,6 +382,22 @@ class _RegionTally:
     area: float = 0.0  # summed over the layers, mm2
     layers: int = 0  # layers in which the region holds infill area
     last_chunk: int = -1
+
+
+@dataclass
+class _MeshFacts:
+    """What the run has learned of one mesh from its layers so far (None: not yet)."""
+
+    line_width: float | None = None  # mm, from its walls (layers after the first)
+    density: float | None = None  # its infill density, from its FILL lines
+    region_density: float | None = None  # as an infill-mesh modifier: its region's density
+    reach_density: float | None = None  # the first estimate, for the closing radius only
+    cura_density: float | None = None  # Cura's own, from its FILL spacing
+    extruder: int | None = None  # the extruder of its first block
+
+    def learned(self) -> tuple:
+        """What a layer's result depends on (the extruder only picks the footer's density, read anew)."""
+        return (self.line_width, self.density, self.region_density, self.reach_density, self.cura_density)
 
 
 @dataclass
@@ -449,18 +468,15 @@ class _Run:
         self.report = ProcessReport(volumetric=info.volumetric)
         self.patterns = PatternCache(settings, extents=survey.extents)
         self.area_cache = AreaCache()
-        self.mesh_lw: dict[str, float] = {}
-        self.mesh_density: dict[str, float] = {}
-        self.region_density: dict[str, float] = {}
+        self.meshes: dict[str, _MeshFacts] = {}  # by ;MESH: name
+        self.first_lw: float | None = None  # the first line width learned from any mesh's walls
         self.tally: dict[str, _RegionTally] = {}
         self.chunks_seen = 0  # the layers' per-region tally counts a region once per chunk
         self.zone_areas: dict[tuple, tuple] = {}
         self.clips: dict[tuple, object] = {}
         self.result_memo: dict[int, tuple] = {}
-        self.cura_density: dict[str, float] = {}
         self.modifier_areas: dict[tuple, object] = {}
         self.shares: dict[tuple, tuple] = {}
-        self.reach_density: dict[str, float] = {}
         self.few_lines_density: dict[tuple, float] = {}
         self.layer_densities: dict[tuple, tuple] = {}  # this layer's `infill_density` answers
         self.grown: dict[tuple, tuple] = {}
@@ -475,7 +491,6 @@ class _Run:
         self.prev_z: float | None = None
         self.repeats = RepeatCache() if settings.repeat_layers else None
         self.footer = read_footer(survey.last_chunk)
-        self.mesh_extruder: dict[str, int] = {}
         # Lightning infill shows only where it supports a top skin, not where infill may go: no witness
         # confirms the area, so Cura's infill stays.
         patterns = {settings.infill_pattern} if settings.infill_pattern else {
@@ -499,6 +514,12 @@ class _Run:
         self.measured_lw: float | None = None
 
     # ------------------------------------------------------------------ helpers
+    def _facts(self, mesh: str) -> _MeshFacts:
+        facts = self.meshes.get(mesh)
+        if facts is None:
+            facts = self.meshes[mesh] = _MeshFacts()
+        return facts
+
     def _line_width(self, parse: LayerParse, mesh: str) -> float:
         ms = self.s.mesh(mesh)
         if self.measured_lw is None and _has_both_walls(parse, mesh) and parse.number is not None and parse.number >= 1:
@@ -508,18 +529,19 @@ class _Run:
             return ms.line_width
         if self.s.line_width:
             return self.s.line_width
-        lw = self.mesh_lw.get(mesh)
-        if lw is not None:
-            return lw
+        facts = self._facts(mesh)
+        if facts.line_width is not None:
+            return facts.line_width
         w = wall_line_width(parse, mesh) if _has_both_walls(parse, mesh) else None
         if w is not None:
             # The first layer may use its own (wider) line width: remember only later layers.
             if parse.number is not None and parse.number >= 1:
-                self.mesh_lw[mesh] = w
+                facts.line_width = w
+                self.first_lw = self.first_lw or w
             self.any_lw = self.any_lw or w
             return w
-        if self.mesh_lw:
-            return next(iter(self.mesh_lw.values()))
+        if self.first_lw is not None:
+            return self.first_lw
         if self.any_lw is None:
             for other in parse.meshes:
                 w = wall_line_width(parse, other) if other != mesh and _has_both_walls(parse, other) else None
@@ -649,8 +671,8 @@ class _Run:
         """What this run has learned so far that a layer's result depends on (retraction, per-mesh figures)."""
         return (
             tuple(vars(self.retraction).values()),
-            (tuple(self.mesh_lw.items()), self.any_lw, tuple(self.mesh_density.items()),
-             tuple(self.region_density.items()), tuple(self.reach_density.items()), tuple(self.cura_density.items())),
+            self.any_lw,
+            tuple((name, facts.learned()) for name, facts in self.meshes.items() if facts.learned() != _NOTHING_LEARNED),
         )
 
     def _totals(self) -> tuple:
@@ -734,19 +756,20 @@ class _Run:
         footer = self._footer_density(mesh, fill, lw)
         if footer is not None:
             return footer
-        d = self.mesh_density.get(mesh)
+        facts = self._facts(mesh)
+        d = facts.density
         if d is None:
             d = self._infill_density(fill, lw, area.area if area is not None else None)
             if d is None:
                 return 0.2
             if len(fill) >= 12:
-                self.mesh_density[mesh] = d
+                facts.density = d
         elif len(fill) >= 12:
             # Cura made this mesh's infill denser from here on (gradual infill's steps under a top
             # surface): never print less than it does.
             here = self._infill_density(fill, lw)
             if here is not None and here > 1.25 * d and family_spacings(fill, lw) is not None:
-                d = self.mesh_density[mesh] = here
+                d = facts.density = here
         return d
 
     def _footer_density(self, mesh: str, fill: np.ndarray, lw: float) -> float | None:
@@ -756,7 +779,7 @@ class _Run:
         lines form clear families at another density (more than a quarter off)
         has a per-model density of its own, which its lines tell.
         """
-        wanted = self.footer.infill_density(self.mesh_extruder.get(mesh, 0))
+        wanted = self.footer.infill_density(self._facts(mesh).extruder or 0)
         if wanted is None or wanted <= 0.0:
             return None
         spacings = family_spacings(fill, lw) if len(fill) >= 12 else None
@@ -770,7 +793,8 @@ class _Run:
             return ms.region_density
         if ms is not None and ms.density is not None:
             return ms.density
-        d = self.region_density.get(mesh)
+        facts = self._facts(mesh)
+        d = facts.region_density
         if d is None:
             # Too few lines to trust for every layer: remembered for this layer's very lines only.
             key = (mesh, lw, hashlib.blake2b(np.round(fill, 3).tobytes(), digest_size=12).digest(),
@@ -782,7 +806,7 @@ class _Run:
                     self.few_lines_density.clear()
                 self.few_lines_density[key] = d
             if len(fill) >= 12:
-                self.region_density[mesh] = d
+                facts.region_density = d
         return d
 
     def _infill_density(self, fill: np.ndarray, lw: float, area: float | None = None) -> float | None:
@@ -837,19 +861,21 @@ class _Run:
             if not b.has_moves or b.mesh in steps:
                 continue
             name = b.mesh
-            self.mesh_extruder.setdefault(name, b.extruder)
+            facts = self._facts(name)
+            if facts.extruder is None:
+                facts.extruder = b.extruder
             lw = self._line_width(parse, name)
             ms = s.mesh(name)
             overlap = ms.infill_overlap if ms is not None and ms.infill_overlap is not None else s.infill_overlap
             if overlap is None:
                 overlap = 0.1 * lw
-            guess = self.mesh_density.get(name) or self.region_density.get(name) or self.reach_density.get(name)
+            guess = facts.density or facts.region_density or facts.reach_density
             if guess is None:
                 # Cura's own density of this mesh sets how far apart its FILL lines are.
                 sel = parse.mesh_mask(name) & is_fill & (parse.moves["de"] > 0)
                 guess = self._infill_density(segments_of(parse.moves, sel), lw)
                 if guess is not None:
-                    self.reach_density[name] = guess  # only sets a closing radius: the first estimate will do
+                    facts.reach_density = guess  # only sets a closing radius: the first estimate will do
                 guess = guess or 0.2
             closing = min(25.0, max(2 * lw, 1.5 * lw / max(guess, 0.04)))
             geo = mesh_layer(parse, name, lw, overlap, closing, self.area_cache, hull_without_walls=False)
@@ -1170,11 +1196,12 @@ class _Run:
 
     def _cura_density(self, mesh: str, fill: np.ndarray, lw: float) -> float:
         """Cura's own density of a mesh (from its FILL spacing), remembered."""
-        d = self.cura_density.get(mesh)
+        facts = self._facts(mesh)
+        d = facts.cura_density
         if d is None:
             d = self._infill_density(fill, lw) or 0.2
             if len(fill) >= 12:
-                self.cura_density[mesh] = d
+                facts.cura_density = d
         return d
 
     def _modifier_areas(self, host: _MeshStep, children: list) -> list:

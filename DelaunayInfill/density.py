@@ -1,19 +1,20 @@
-"""Density maps and density calibration.
+"""Density maps and the sampling radius of a density.
 
 A density map is a base density plus regions ``(polygon, density)`` that
 override it where they lie (later regions win), optionally blended across a
 border of `feather` mm.  The sampler needs a radius field; for a maximal
 Poisson-disk set triangulated by Delaunay the printed density is close to
 ``KAPPA * line_width / r`` (edge length per area times line width), so the
-first guess is ``r = KAPPA * w / density`` and measured calibration corrects
-it per zone until the printed density matches the target.
+first guess is ``r = KAPPA * w / density`` (`sampling_radius`) and measured
+calibration corrects it per zone until the printed density matches the
+target (the pattern build, with `metering` and `calibration`).
 
 The paper's calibration is its Formula (6), rho = 2 / r at a 1.2 mm line
 width; scaled for the line width that is ``r = 2 * (w / 1.2) / rho``.
 
 `DensityMap.raster` labels the zones on a grid of square cells (a scanline
 fill, run by run): with several sharp-border zones the pattern build
-measures its zones on it (`pattern._RasterMeter`) instead of cutting lines
+measures its zones on it (`metering.RasterMeter`) instead of cutting lines
 with the zones' polygons.
 """
 
@@ -27,7 +28,8 @@ from scipy.spatial import cKDTree
 
 from .geometry import as_area, boundary_segments, contains_xy, to_multipolygon, unary_union
 
-__all__ = ["DensityMap", "KAPPA", "ZoneRaster", "coverage_runs", "paper_radius", "check_density", "check_line_width"]
+__all__ = ["DensityMap", "KAPPA", "ZoneRaster", "coverage_runs", "paper_radius", "sampling_radius", "check_density",
+           "check_line_width"]
 
 KAPPA = 2.70  # printed density * r / w for maximal Poisson-disk Delaunay edges (measured)
 _BITS = 52  # polygons per coverage raster: one bit each in a float64 cell sum (exact up to 2^53)
@@ -58,6 +60,14 @@ def check_line_width(value) -> float:
 def paper_radius(density: np.ndarray | float, line_width: float) -> np.ndarray | float:
     """Poisson-disk radius from the paper's Formula (6), scaled for the line width (mm)."""
     return 2.0 * (line_width / 1.2) / density
+
+
+def sampling_radius(density: np.ndarray | float, line_width: float, calibration: str = "measured") -> np.ndarray | float:
+    """Poisson-disk radius (mm) first taken for a density (fraction) at a line width (mm).
+
+    ``measured``: ``KAPPA * line_width / density``; ``paper``: Formula (6) (`paper_radius`).
+    """
+    return paper_radius(density, line_width) if calibration == "paper" else KAPPA * line_width / density
 
 
 @dataclass(frozen=True)

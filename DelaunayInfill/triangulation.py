@@ -16,6 +16,7 @@ from .geometry import contains_xy
 __all__ = [
     "delaunay_triangles",
     "GrowingDelaunay",
+    "growing_delaunay",
     "canonical_triangles",
     "unique_edges",
     "lop_violations",
@@ -90,6 +91,14 @@ class GrowingDelaunay:
             self._qhull.add_points(points)
             self.points = np.concatenate((self.points, points))
         return _counter_clockwise(self.points, self._qhull.simplices)
+
+
+def growing_delaunay(points: np.ndarray) -> GrowingDelaunay | None:
+    """A `GrowingDelaunay` of the points (n, 2), or None where qhull refuses them (degenerate)."""
+    try:
+        return GrowingDelaunay(points)
+    except (QhullError, ValueError):
+        return None
 
 
 def canonical_triangles(triangles: np.ndarray) -> np.ndarray:

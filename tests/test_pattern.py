@@ -11,7 +11,7 @@ from shapes import SHAPES, star, star_regions
 from DelaunayInfill import InfillPattern, generate_infill
 from DelaunayInfill.decomposition import cross_turn, decompose_convex, is_convex, reflex_vertices
 from DelaunayInfill.geometry import contains_xy, unary_union
-from DelaunayInfill.pattern import measured_density
+from DelaunayInfill.metering import measured_density
 
 
 def length_in(segments, area):
@@ -277,14 +277,14 @@ def test_whole_regions_print_their_density(case, seed):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_zone_meter_measures_like_clipping(seed):
     """The calibration's fast zone measurement equals exact clipping, crossings included."""
-    from DelaunayInfill.pattern import _ZoneMeter
+    from DelaunayInfill.metering import ZoneMeter
 
     rng = np.random.default_rng(seed)
     zones = [star(), *[p for p, _ in star_regions()], box(-5, -5, 5, 5).difference(Point(0, 0).buffer(2))]
     starts = rng.uniform(-35, 35, (400, 2))
     ends = starts + rng.normal(0, 4, (400, 2)) * rng.choice([0.2, 1.0, 5.0], (400, 1))
     segments = np.stack([starts, ends], axis=1)
-    meter = _ZoneMeter(zones)
+    meter = ZoneMeter(zones)
     for k, zone in enumerate(zones):
         exact = measured_density(segments, zone, 0.4)
         assert meter.densities(segments, 0.4)[k] == pytest.approx(exact, rel=1e-9, abs=1e-12)
@@ -294,19 +294,19 @@ def test_zone_meter_measures_like_clipping(seed):
 def test_zone_meter_cuts_a_few_segments_as_it_cuts_many(seed, monkeypatch):
     """A few segments at a time (balancing's new edges: pairs found in the edges' tree) measure
     bit for bit as through the many-segment path (a tree of their own), and as clipping does."""
-    from DelaunayInfill import pattern as pattern_module
-    from DelaunayInfill.pattern import _ZoneMeter
+    from DelaunayInfill import metering
+    from DelaunayInfill.metering import ZoneMeter
 
     rng = np.random.default_rng(seed)
     zones = [star(), *[p for p, _ in star_regions()], box(-5, -5, 5, 5).difference(Point(0, 0).buffer(2))]
     starts = rng.uniform(-35, 35, (240, 2))
     ends = starts + rng.normal(0, 4, (240, 2))
     segments = np.stack([starts, ends], axis=1)
-    meter = _ZoneMeter(zones)
+    meter = ZoneMeter(zones)
     chunks = np.array_split(segments, 60)  # 4 segments a call
     measured = {}
     for few in (0, 10**6):
-        monkeypatch.setattr(pattern_module, "_FEW", few)
+        monkeypatch.setattr(metering, "_FEW", few)
         measured[few] = np.concatenate([meter.inside_all(chunk) for chunk in chunks], axis=1)
     assert np.array_equal(measured[0], measured[10**6])
     for k, zone in enumerate(zones):
@@ -316,12 +316,13 @@ def test_zone_meter_cuts_a_few_segments_as_it_cuts_many(seed, monkeypatch):
 
 def test_balancing_cache_measures_like_a_fresh_meter():
     """Edge lengths cached between balancing rounds (points appended) equal a fresh measurement."""
-    from DelaunayInfill.pattern import _inside_lengths, _ZoneMeter
+    from DelaunayInfill.calibration import _inside_lengths
+    from DelaunayInfill.metering import ZoneMeter
     from DelaunayInfill.triangulation import delaunay_triangles, unique_edges
 
     rng = np.random.default_rng(4)
     zones = [star().difference(unary_union([p for p, _ in star_regions()])), *[p for p, _ in star_regions()]]
-    meter = _ZoneMeter(zones)
+    meter = ZoneMeter(zones)
     points = rng.uniform(-35, 35, (300, 2))
     known = {}
     for extra in (0, 40, 80):
@@ -418,18 +419,18 @@ def test_zones_are_each_region_minus_later_ones_overlapping_or_touching(seed):
 
 
 def test_zone_interiors_drop_a_band_along_borders_with_other_zones_only():
-    """_zone_interiors (a feathered map's zone cores): each zone loses the points within a line width
+    """zone_interiors (a feathered map's zone cores): each zone loses the points within a line width
     of another zone (not of the outline); a zone the band would
     (nearly) swallow, or a strip narrower than 1.4 widths, is kept whole."""
     from DelaunayInfill.geometry import to_multipolygon
-    from DelaunayInfill.pattern import _zone_interiors
+    from DelaunayInfill.metering import zone_interiors
 
     width = 0.4
     area = box(0, 0, 60, 40)
     left, right = box(0, 0, 30, 40), box(30, 0, 60, 40)
     strip = box(0, 0, 60, 0.5)  # between the outline and the other zones
     zones = [to_multipolygon(z) for z in (left.difference(strip), right.difference(strip), strip)]
-    inner = _zone_interiors(zones, width)
+    inner = zone_interiors(zones, width)
     for k in range(2):
         others = area.difference(zones[k])
         want = zones[k].difference(others.buffer(width, 4))
@@ -439,17 +440,17 @@ def test_zone_interiors_drop_a_band_along_borders_with_other_zones_only():
     # The same strip wider than 1.4 widths but swallowed by bands along both long sides: whole too.
     strip = box(0, 10, 60, 11)
     zones = [to_multipolygon(z) for z in (box(0, 0, 60, 10), strip, box(0, 11, 60, 40))]
-    assert _zone_interiors(zones, width)[1].equals(zones[1])
+    assert zone_interiors(zones, width)[1].equals(zones[1])
     # A strip narrower than 1.4 widths mostly along the outline (its band would take 15 %): whole.
     tower = box(0, 0.5, 10, 40)
     strip = box(0, 0, 60, 0.5)
     zones = [to_multipolygon(strip), to_multipolygon(tower)]
-    inner = _zone_interiors(zones, width)
+    inner = zone_interiors(zones, width)
     assert inner[0].equals(zones[0])
     assert abs(inner[1].area - (tower.area - width * 10)) < 1e-6  # the tower loses its band
     # Zones side by side: each loses the band along the other.
     apart = [to_multipolygon(box(0, 0, 10, 10)), to_multipolygon(box(10, 0, 20, 10))]
-    inner = _zone_interiors(apart, width)
+    inner = zone_interiors(apart, width)
     assert abs(inner[0].area - (100 - 10 * width)) < 1e-6
 
 
@@ -458,13 +459,13 @@ def test_raster_meter_measures_like_clipping_within_its_cells():
     a cell, each piece counted in the zone of its midpoint's cell.  Per zone the length is the
     exact clipped length up to about a cell per boundary crossing."""
     from DelaunayInfill.density import DensityMap
-    from DelaunayInfill.pattern import _RasterMeter
+    from DelaunayInfill.metering import RasterMeter
 
     rng = np.random.default_rng(7)
     area = star()
     dmap = DensityMap.create(0.2, star_regions())
     cell = 0.18
-    meter = _RasterMeter(dmap.raster(area, cell), len(dmap.densities))
+    meter = RasterMeter(dmap.raster(area, cell), len(dmap.densities))
     starts = rng.uniform(-35, 35, (600, 2))
     segments = np.stack([starts, starts + rng.normal(0, 3, (600, 2))], axis=1)
     inside = meter.inside_all(segments)
@@ -490,12 +491,13 @@ def test_raster_meter_measures_like_clipping_within_its_cells():
 def test_balancing_keeps_its_best_round(monkeypatch):
     """Balancing stops two rounds after the largest shortfall last got smaller and keeps the round
     that had it (refinement can go back and forth between neighbouring zones)."""
-    from DelaunayInfill import pattern as pattern_module
+    from DelaunayInfill import calibration
     from DelaunayInfill.density import DensityMap
+    from DelaunayInfill.metering import raster_meter
 
     area = star()
     dmap = DensityMap.create(0.2, star_regions())
-    meter = pattern_module._raster_meter(area, dmap, 0.4)
+    meter = raster_meter(area, dmap, 0.4)
     targets = np.array(dmap.densities)
     rng = np.random.default_rng(1)
     points = rng.uniform(-32, 32, (300, 2))
@@ -511,9 +513,9 @@ def test_balancing_keeps_its_best_round(monkeypatch):
         rounds.append(len(points))
         return np.full((len(rounds), 2, 2), float(len(rounds))), measured
 
-    monkeypatch.setattr(pattern_module, "_thin_dense_zones", scripted)
+    monkeypatch.setattr(calibration, "_thin_dense_zones", scripted)
     small = np.ones(len(targets), dtype=bool)
-    out_points, _, segments, measured = pattern_module._balance_zones(points, triangles, meter, targets, 0.4, small)
+    out_points, _, segments, measured = calibration.balance_zones(points, triangles, meter, targets, 0.4, small)
     assert len(rounds) == 4  # rounds 3 and 4 did not beat round 2
     assert len(segments) == 2 and measured[3] == pytest.approx(targets[3] - 0.008)
     assert len(out_points) == rounds[1]  # round 2's points (before its refinement)
@@ -534,16 +536,16 @@ def test_raster_meter_only_where_it_measures_well():
     """The raster meter serves several sharp-border zones; one zone, or a zone of a few cells once
     a large part's cells grew wider than a line, is measured exactly instead (None)."""
     from DelaunayInfill.density import DensityMap
-    from DelaunayInfill.pattern import _raster_meter, _RasterMeter
+    from DelaunayInfill.metering import RasterMeter, raster_meter
 
     width = 0.4
-    assert isinstance(_raster_meter(star(), DensityMap.create(0.2, star_regions()), width), _RasterMeter)
+    assert isinstance(raster_meter(star(), DensityMap.create(0.2, star_regions()), width), RasterMeter)
     whole = DensityMap.create(0.2, [(star().buffer(1), 0.4)])  # one region over all: one zone
-    assert _raster_meter(star(), whole, width) is None
+    assert raster_meter(star(), whole, width) is None
     large = box(0, 0, 400, 400)  # 0.4 x 400 x 400 / 120000 cells: 1.15 mm cells
-    assert _raster_meter(large, DensityMap.create(0.2, [(box(10, 10, 14, 14), 0.4)]), width) is None
-    meter = _raster_meter(large, DensityMap.create(0.2, [(box(10, 10, 60, 60), 0.4)]), width)
-    assert isinstance(meter, _RasterMeter) and meter.raster.cell > width
+    assert raster_meter(large, DensityMap.create(0.2, [(box(10, 10, 14, 14), 0.4)]), width) is None
+    meter = raster_meter(large, DensityMap.create(0.2, [(box(10, 10, 60, 60), 0.4)]), width)
+    assert isinstance(meter, RasterMeter) and meter.raster.cell > width
 
 
 _NODE_CASES = {
@@ -578,7 +580,8 @@ def test_thinning_leaves_a_lattice_whole_while_other_edges_can_go():
     first (a lattice missing diagonals is a grid of rhombi: far less stiff per gram); only when
     those are not enough does the lattice lose edges.  Without the preference the longest edges
     go first, and the lattice's (the longest here) would."""
-    from DelaunayInfill.pattern import _thin_dense_zones, _ZoneMeter
+    from DelaunayInfill.calibration import _thin_dense_zones
+    from DelaunayInfill.metering import ZoneMeter
     from DelaunayInfill.sampling import lattice_points
     from DelaunayInfill.triangulation import delaunay_triangles, unique_edges
 
@@ -591,7 +594,7 @@ def test_thinning_leaves_a_lattice_whole_while_other_edges_can_go():
     edges = unique_edges(triangles)
     both = (edges < len(lattice)).all(axis=1)
     lattice_edges = {tuple(e) for e in np.sort(edges[both], axis=1).tolist()}
-    meter = _ZoneMeter([zone])
+    meter = ZoneMeter([zone])
     full = meter.densities(points[edges], 0.4)[0]
     target = full * 0.9  # a tenth too dense: the other edges can make that up
     segments, measured = _thin_dense_zones(points, triangles, meter, [target], 0.4, np.array([True]),

@@ -39,7 +39,6 @@ from .decomposition import decompose_convex
 from .density import DensityMap, check_line_width, sampling_radius
 from .geometry import as_area, contains_xy, polygons_of, to_multipolygon
 from .metering import measured_density, meter_for, segment_length
-from .metering import zone_interiors as _zone_interiors  # noqa: F401  (re-export: bench/bench_core.py imports it here)
 from .routing import chain_segments, clip_segments, odd_vertex_count, order_paths
 from .sampling import sample_lattice, sample_poisson_disk, sample_triangulated
 from .triangulation import (

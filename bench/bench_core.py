@@ -29,7 +29,7 @@ from shapely.geometry import Point, box
 
 from DelaunayInfill import InfillPattern, sample_poisson_disk
 from DelaunayInfill.figures import star_polygon, star_regions
-from DelaunayInfill.pattern import _zone_interiors, measured_density
+from DelaunayInfill.metering import measured_density, zone_interiors
 from DelaunayInfill.routing import chain_segments, clip_segments, order_paths
 from DelaunayInfill.sampling import uncovered_fraction
 
@@ -145,7 +145,7 @@ def zones_table(repeat: int) -> str:
     targets = [d for _, d in regions]
     worst = max(abs(got - want) for got, want in zip(pattern.calibrated_densities[1:], targets))
     # The same, measured exactly (clipping) on the zones without a width along their borders.
-    interiors = _zone_interiors(pattern.density_map.zones(pattern.footprint), width, pattern.footprint)
+    interiors = zone_interiors(pattern.density_map.zones(pattern.footprint), width)
     exact = max(abs(measured_density(pattern.segments, zone, width) - want)
                 for zone, want in zip(interiors[1:], targets))
     lines = [

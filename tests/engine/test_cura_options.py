@@ -1,0 +1,117 @@
+"""Cura options the everyday corpus does not set, through real CuraEngine slices.
+
+* **Infill Layer Thickness** (``infill_sparse_thickness`` = 2 layers): Cura prints the infill of two
+  layers as one line twice as high in the upper layer, and single lines only where the sections
+  differ.  The pass keeps Cura's infill and says so, from the settings footer, and without it from the
+  G-code's own extrusion; the everyday checker finds nothing printed where Cura does not print.
+* **Infill patterns whose lines pair up** (octet, quarter cubic, cross, cross 3D): one layer's lines
+  come in pairs whose gap changes from layer to layer, so their spacing does not tell the density.
+  With the footer the pass prints its density; without it, what the lines' length says.
+
+    python3 -m pytest tests/engine/test_cura_options.py -q -c tests/pytest.ini
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from DelaunayInfill import process_gcode
+from DelaunayInfill.curaengine import CuraEngineError
+from DelaunayInfill.gcode.read import as_cura_list
+
+from .engines import ENGINES
+from .everyday import EverydayCase, EverydaySliceCache
+from .everyday_check import check_everyday
+
+DENSITY = 20.0
+PAIRED_PATTERNS = ("tetrahedral", "quarter_cubic", "cross", "cross_3d")
+
+
+def _case(model: str, settings: dict, exercises: str) -> EverydayCase:
+    return EverydayCase(model, ((model, (0.0, 0.0)),), settings, exercises)
+
+
+@pytest.fixture(scope="module")
+def option_slices(engine_info, tmp_path_factory) -> EverydaySliceCache:
+    return EverydaySliceCache(tmp_path_factory.mktemp("cura-options"))
+
+
+def _slice(cache, case, version):
+    try:
+        return cache.get(case, DENSITY, version)
+    except CuraEngineError as exc:
+        pytest.fail(f"CuraEngine {version} cannot slice {case.name} ({case.exercises}): {exc}", pytrace=False)
+
+
+def _without_footer(text: str) -> str:
+    """The G-code as the CuraEngine command line writes it: no ;SETTING_3 footer."""
+    return "".join(line for line in text.splitlines(keepends=True) if not line.startswith(";SETTING_3"))
+
+
+def _process(sliced, footer: bool):
+    with open(sliced.cura_gcode, encoding="utf-8") as f:
+        original = f.read()
+    if not footer:
+        original = _without_footer(original)
+    with open(sliced.reference_gcode, encoding="utf-8") as f:
+        reference = f.read()
+    layers, report = process_gcode(as_cura_list(original))
+    processed = "".join(layers)
+    result = check_everyday(original, processed, reference, sliced.section_at, spacing=sliced.spacing,
+                            line_width=sliced.line_width)
+    return original, processed, report, result
+
+
+THICKNESS_CASES = {
+    # name: (case, whether its top layers' infill lies inside the layers below: replaced)
+    "prism": (_case("through_hole", {"infill_sparse_thickness": 0.4}, "a prism with holes"), True),
+    "shrinking": (_case("dome", {"infill_sparse_thickness": 0.4}, "a dome: each section inside the one below"), True),
+    "growing": (_case("cone_up", {"infill_sparse_thickness": 0.4, "wall_line_count": 2},
+                      "a cone growing upwards: each section over the one below"), False),
+}
+
+
+@pytest.mark.parametrize("version", ENGINES)
+@pytest.mark.parametrize("footer", [True, False], ids=["footer", "no-footer"])
+@pytest.mark.parametrize("name", sorted(THICKNESS_CASES))
+def test_infill_layer_thickness(option_slices, name, footer, version):
+    """Infill every 2 layers: a top layer whose infill area the layer below holds gets the new infill as
+    high as Cura's line; the others keep Cura's. Nowhere new infill where Cura has none (the checker)."""
+    case, replaced = THICKNESS_CASES[name]
+    sliced = _slice(option_slices, case, version)
+    _, _, report, result = _process(sliced, footer=footer)
+    assert result.ok, result.report()
+    if not footer:  # found in the extrusion: from the first layer printed two layers high
+        assert any("2 layers high (Cura's Infill Layer Thickness)" in w for w in report.warnings), report.warnings
+    if replaced:
+        assert report.layers_processed >= 10, report.format_table()
+        assert abs(report.regions[0].measured - DENSITY / 100) < 0.02, report.format_table()
+        # the filament of lines two layers high: what Cura's put out, about
+        assert abs(report.filament_after_mm / report.filament_before_mm - 1.0) < 0.05, report.format_table()
+    else:
+        assert any("Infill Layer Thickness prints it 2 layers high" in w and "grows" in w
+                   for w in report.warnings), report.warnings
+        assert abs(report.filament_after_mm / report.filament_before_mm - 1.0) < 0.01, report.format_table()
+
+
+PATTERN_CASES = [_case("dome", {"infill_pattern": p}, f"{p} infill") for p in PAIRED_PATTERNS]
+
+
+@pytest.mark.parametrize("version", ENGINES)
+@pytest.mark.parametrize("footer", [True, False], ids=["footer", "no-footer"])
+@pytest.mark.parametrize("case", PATTERN_CASES, ids=lambda c: c.settings["infill_pattern"])
+def test_paired_line_patterns_print_their_density(option_slices, case, footer, version):
+    """With the footer: its density (the pass added 76-86 % filament before); without: what the lines'
+    length over the area says."""
+    sliced = _slice(option_slices, case, version)
+    _, _, report, result = _process(sliced, footer=footer)
+    assert result.ok, result.report()
+    base = report.regions[0]
+    if footer:
+        assert abs(base.target - DENSITY / 100) < 1e-6, (base.target, case.exercises)
+        assert abs(base.measured - DENSITY / 100) < 0.01, (base.measured, case.exercises)
+        # (Cura's cross patterns print a little under their density: up to 10 % more filament)
+        assert report.filament_after_mm < 1.12 * report.filament_before_mm, case.exercises
+    else:
+        assert 0.15 <= base.measured <= 0.22, (base.measured, case.exercises)
+        assert abs(report.filament_after_mm / report.filament_before_mm - 1.0) < 0.06, case.exercises

@@ -149,3 +149,19 @@ def test_cura_s_gradual_infill_steps_reach_the_pass():
     assert settings.gradual_infill_steps == 2
     settings, _ = build_settings(_snapshot([_model("star.stl")]))
     assert settings.gradual_infill_steps == 0
+
+
+def test_cura_s_infill_layer_thickness_reaches_the_pass_as_layers():
+    settings, _ = build_settings(_snapshot([_model("star.stl", infill_sparse_thickness=0.4)], layer_height=0.2))
+    assert settings.infill_layers == 2
+    settings, _ = build_settings(_snapshot([_model("star.stl", infill_sparse_thickness=0.2)], layer_height=0.2))
+    assert settings.infill_layers == 1
+    settings, _ = build_settings(_snapshot([_model("star.stl")]))
+    assert settings.infill_layers is None  # (then the pass reads the G-code's footer and extrusion)
+
+
+def test_cura_s_infill_as_support_reaches_the_pass():
+    settings, _ = build_settings(_snapshot([_model("star.stl", infill_support_enabled=True)]))
+    assert settings.infill_support is True
+    settings, _ = build_settings(_snapshot([_model("star.stl")]))
+    assert settings.infill_support is False

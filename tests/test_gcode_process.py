@@ -631,3 +631,92 @@ def test_the_paper_layout_decomposes_the_h_bracket_with_its_modifier(bracket, se
     assert not report.failed_layers, report.failure_messages[:2]
     for region in report.regions:
         assert abs(region.measured - region.target) <= 0.02, report.format_table()
+
+
+def _combined_from(chunks: list[str], first: int) -> list[str]:
+    """The G-code as Cura's Infill Layer Thickness of 2 layers prints a prism from layer `first` on: every
+    FILL extrusion of the even layers twice as large, the odd layers' FILL moves travels (absolute E:
+    every later E word moves by what was added or taken; G92 resets the register)."""
+    out, kind, layer, previous, added = [], None, -1, 0.0, 0.0
+    for chunk in chunks:
+        lines = chunk.split("\n")
+        for i, line in enumerate(lines):
+            if line.startswith(";LAYER:"):
+                layer = int(line[7:])
+            elif line.startswith(";TYPE:"):
+                kind = line[6:]
+            elif line.startswith("G92") and " E" in line:
+                previous, added = float(re.search(r" E([-\d.]+)", line).group(1)), 0.0
+            elif line.startswith(("G0", "G1")) and " E" in line:
+                e = float(re.search(r" E([-\d.]+)", line).group(1))
+                extruding_fill = kind == "FILL" and layer >= first and e > previous and (" X" in line or " Y" in line)
+                if extruding_fill and layer % 2 == 0:
+                    added += e - previous
+                elif extruding_fill:
+                    added -= e - previous
+                    previous = e
+                    lines[i] = "G0" + re.sub(r" E[-\d.]+", "", line)[2:]
+                    continue
+                previous = e
+                lines[i] = re.sub(r" E([-\d.]+)", f" E{e + added:.5f}", line)
+        out.append("\n".join(lines))
+    return out
+
+
+def _fill_rates(text: str) -> dict[int, float]:
+    """E per mm of each layer's FILL (absolute E), by layer number."""
+    rates, state = {}, MachineState()
+    for chunk in as_cura_list(text):
+        parse = parse_layer(chunk, state, RetractionModel())
+        if parse.number is None:
+            continue
+        sel = parse.extruding() & parse.kind_mask(FILL)
+        length = parse.xy_length()[sel].sum()
+        if length > 1.0:
+            rates[parse.number] = float(parse.moves["de"][sel].sum() / length)
+    return rates
+
+
+@pytest.mark.parametrize("told", [True, False], ids=["settings", "found in the extrusion"])
+def test_infill_combined_over_two_layers_is_replaced_two_layers_high_on_a_prism(star, told):
+    """Cura's Infill Layer Thickness of 2 layers on a prism: the top layer of each pair gets the new
+    infill with Cura's E per mm (lines two layers high), the layer below keeps having none."""
+    combined = _combined_from(star, 20)
+    out, report = process_gcode(combined, ProcessSettings(infill_layers=2 if told else None))
+    text = "".join(out)
+    check = verify(combined, out)
+    assert check.ok, check.problems
+    assert not report.failed_layers
+    if not told:
+        assert any("layer 20 prints infill 2 layers high" in w for w in report.warnings), report.warnings
+    rates, cura = _fill_rates(text), _fill_rates("".join(combined))
+    single = rates[10]
+    assert all(layer not in rates for layer in range(21, 50, 2))  # the layers below: still no infill
+    tops = [layer for layer in range(20, 49, 2) if layer in rates]
+    assert len(tops) >= 12
+    for layer in tops:
+        assert rates[layer] == pytest.approx(2 * single, rel=0.02), layer
+        assert rates[layer] == pytest.approx(cura[layer], rel=0.01), layer
+    # told, the single layers before keep Cura's infill (a layer below a top one has Cura's single lines
+    # only where its section differs: not told apart from a whole layer of them); found, they were
+    # processed before the first top layer
+    expected = len(tops) if told else len(tops) + 10
+    assert report.layers_processed == expected if told else report.layers_processed >= expected, (report.layers_processed, tops)
+
+
+def test_infill_layers_given_where_cura_combined_none_replaces_nothing_two_layers_high(star):
+    """Told 2 layers on a file whose FILL is single everywhere: no layer is a top one, Cura's infill stays."""
+    out, report = process_gcode(star, ProcessSettings(infill_layers=2))
+    assert report.layers_processed == 0
+    assert [line for line in "".join(out).splitlines() if not line.startswith(MARKER)] == "".join(star).splitlines()
+
+
+def test_infill_as_support_keeps_cura_s_infill_and_says_so(star):
+    """Cura's Infill as Support prints infill only under the top surfaces it holds up; its lines do not
+    show how far that reaches (a line spacing of band beyond it would be confirmed): Cura's stays."""
+    out, report = process_gcode(star, ProcessSettings(infill_support=True))
+    assert report.layers_processed == 0
+    assert [line for line in "".join(out).splitlines() if not line.startswith(MARKER)] == "".join(star).splitlines()
+    assert any("Infill as Support" in w for w in report.warnings), report.warnings
+    _, report = process_gcode(star, ProcessSettings(infill_support=False))
+    assert report.layers_processed > 0 and not any("Infill as Support" in w for w in report.warnings)

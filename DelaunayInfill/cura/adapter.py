@@ -124,6 +124,9 @@ def build_settings(snapshot):
     if glob.get("jerk_enabled"):
         jerk = _number(primary.values.get("jerk_infill"), jerk)
     flavor = str(glob.get("machine_gcode_flavor") or "")
+    # Cura combines the infill of this many layers into one (Infill Layer Thickness over the layer height)
+    thickness, height = _number(primary.values.get("infill_sparse_thickness")), _number(glob.get("layer_height"))
+    infill_layers = max(1, int(round(thickness / height))) if thickness and height and height > 0 else None
     settings = ProcessSettings(
         density=_infill_fraction(primary.values),
         line_width=_number(primary.values.get("infill_line_width")),
@@ -135,6 +138,8 @@ def build_settings(snapshot):
         layout=str(primary.values.get("delaunay_infill_layout") or "seamless"),
         infill_pattern=str(primary.values.get("infill_pattern") or "") or None,
         gradual_infill_steps=int(_number(primary.values.get("gradual_infill_steps"), 0.0)),
+        infill_layers=infill_layers,
+        infill_support=bool(primary.values.get("infill_support_enabled")),
         meshes=meshes,
         process_unlisted_meshes=False,
         filament_diameter=_number(extruder.get("material_diameter")),

@@ -36,7 +36,6 @@ from UM.Logger import Logger
 from UM.Operations.Operation import Operation
 from UM.Scene.Iterator.DepthFirstIterator import DepthFirstIterator
 from UM.Scene.SceneNodeDecorator import SceneNodeDecorator
-from UM.Scene.Selection import Selection
 
 from . import paint
 from .region_shapes import scene_to_gcode

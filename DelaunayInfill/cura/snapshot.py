@@ -24,6 +24,7 @@ MESH_KEYS = (
     "infill_pattern",
     "gradual_infill_steps",
     "infill_sparse_thickness",
+    "infill_support_enabled",
     "speed_infill",
     "acceleration_infill",
     "jerk_infill",

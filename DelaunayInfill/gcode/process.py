@@ -373,6 +373,17 @@ def _split_empty_regions(regions: list) -> tuple[list, object, list]:
 
 # ----------------------------------------------------------------------------- the run
 _NOTHING_LEARNED = (None,) * 5
+# FILL extruding this much more per mm (against the walls) than before: infill combined over layers
+_COMBINED_RATIO = 1.6
+# A density read from the lines' spacing this much over what their length gives (in an area at least
+# this many spacings across, where lines cut short at the border hardly count) is not the density
+# (line patterns measure 0.86-1.09 on the everyday models; gradual infill's steps are denser in part
+# of the area, so it is not asked there)
+_SPACING_OVER_LENGTH = 1.2
+_WIDE_AREA_SPACINGS = 4.0
+# Cura patterns whose lines in one layer do not show their density as a spacing (lines in pairs whose
+# gap changes from layer to layer): the footer's density holds even where their spacing disagrees
+_PAIRED_LINE_PATTERNS = frozenset({"tetrahedral", "quarter_cubic", "cross", "cross_3d"})
 
 
 @dataclass
@@ -394,6 +405,8 @@ class _MeshFacts:
     reach_density: float | None = None  # the first estimate, for the closing radius only
     cura_density: float | None = None  # Cura's own, from its FILL spacing
     extruder: int | None = None  # the extruder of its first block
+    fill_wall_ratio: float | None = None  # smallest E per mm of its FILL over its walls' so far (one layer's infill)
+    sections: tuple = ()  # combined infill: its last layers' rebuilt infill areas, newest last
 
     def learned(self) -> tuple:
         """What a layer's result depends on (the extruder only picks the footer's density, read anew)."""
@@ -500,18 +513,105 @@ class _Run:
             self.report.warnings.append(
                 "Cura's lightning infill kept: its lines do not show where infill may go. Choose another "
                 "infill pattern (grid, for one) in Cura to have it replaced")
+        # Infill as Support likewise prints infill only under the top surfaces it holds up: its lines
+        # confirm a band a line spacing wide beyond that region, inside the part over nothing.
+        support = settings.infill_support
+        if support is None:
+            support = any((self.footer.value("infill_support_enabled", e) or "").strip().lower() == "true"
+                          for e in range(max(1, len(self.footer.extruder_values))))
+        if support and not self.keep_cura:
+            self.keep_cura = True
+            self.report.warnings.append(
+                "Cura's infill kept: Infill as Support prints infill only under the top surfaces it holds up, "
+                "and its lines do not show how far that reaches. Turn Infill as Support off in Cura to have "
+                "it replaced")
         steps = settings.gradual_infill_steps
         if steps is None:
             found = [self.footer.number("gradual_infill_steps", e) for e in range(max(1, len(self.footer.extruder_values)))]
             steps = int(max([v for v in found if v is not None], default=0))
+        self.gradual_steps = steps
         if steps > 0 and not self.keep_cura:
             self.report.warnings.append(
                 f"Cura's gradual infill ({steps} step{'s' if steps > 1 else ''}) is replaced by uniform infill at its "
                 "full density, which uses more material than Cura's: set Gradual Infill Steps to 0, or a "
                 "lower infill density")
+        # how many layers Cura's infill is combined over (Infill Layer Thickness): 1, none
+        self.infill_layers = settings.infill_layers if settings.infill_layers is not None else self._footer_infill_layers()
+        self.combined_kept = 0  # mesh layers that kept Cura's combined infill
+        self.layer_sections: dict[str, object] = {}  # this layer's infill area of each mesh (combined infill only)
         self.lw_warned = False
         self.any_lw: float | None = None
         self.measured_lw: float | None = None
+
+    # ------------------------------------------------------------------ combined infill layers
+    # Cura's Infill Layer Thickness (N layers): Cura moves the infill that N layers share up into the top
+    # one of the group, as a line N layers high, and leaves single lines where their sections differ.
+    # A top layer whose infill area lies inside the areas of the layers below it in its group (a
+    # prism's, a dome's: all of its infill is shared) is replaced, with lines as high as Cura's; every
+    # other layer keeps Cura's infill (a growing section's top layer has single lines of its own).
+    def _footer_infill_layers(self) -> int:
+        """How many layers the footer's Infill Layer Thickness combines Cura's infill over (1: none)."""
+        most = 1
+        for e in range(max(1, len(self.footer.extruder_values))):
+            thickness = self.footer.number("infill_sparse_thickness", e)
+            height = self.footer.number("layer_height", e) or self.info.layer_height
+            if thickness and height and height > 0:
+                most = max(most, int(round(thickness / height)))
+        return most
+
+    def _fill_wall_ratio(self, parse: LayerParse, mesh: str) -> float | None:
+        """E per mm of a mesh's FILL over its walls' in this layer (None: it has no FILL or no walls here)."""
+        own = parse.extruding() & parse.mesh_mask(mesh)
+        fill = own & parse.kind_mask(FILL)
+        walls = own & (parse.kind_mask(WALL_INNER) | parse.kind_mask(WALL_OUTER))
+        if not fill.any() or not walls.any():
+            return None
+        fill_rate, wall_rate = e_per_mm(parse, fill), e_per_mm(parse, walls)
+        return fill_rate / wall_rate if fill_rate and wall_rate else None
+
+    def _combined_infill_in(self, parse: LayerParse) -> int:
+        """How many layers a mesh's FILL in this layer is as high as (against the layers before: 1 for none),
+        from its E per mm against its walls'."""
+        most = 1
+        for mesh in parse.meshes:
+            ratio = self._fill_wall_ratio(parse, mesh)
+            if ratio is None:
+                continue
+            facts = self._facts(mesh)
+            if facts.fill_wall_ratio is not None and ratio > _COMBINED_RATIO * facts.fill_wall_ratio:
+                most = max(most, int(round(ratio / facts.fill_wall_ratio)))
+            facts.fill_wall_ratio = ratio if facts.fill_wall_ratio is None else min(facts.fill_wall_ratio, ratio)
+        return most
+
+    def _combined_hosts(self, parse: LayerParse, steps: dict, hosts: list) -> list:
+        """The hosts whose infill this layer replaces under combined infill: a top layer (its FILL as high
+        as the group) whose infill area the layers below it in the group hold too."""
+        n = self.infill_layers
+        allowed = []
+        for name, st in steps.items():
+            facts = self._facts(name)
+            ratio = self._fill_wall_ratio(parse, name)
+            if ratio is not None:
+                facts.fill_wall_ratio = ratio if facts.fill_wall_ratio is None else min(facts.fill_wall_ratio, ratio)
+            top = ratio is not None and ratio > _COMBINED_RATIO * facts.fill_wall_ratio
+            area = st.geo.area
+            below = facts.sections[-(n - 1):]
+            if name in hosts:
+                # (a tenth of a line width out is within the infill's own overlap into the walls)
+                reach = 0.1 * st.line_width
+                if top and len(below) == n - 1 and all(
+                        area.difference(b.buffer(reach, 2)).area <= reach * reach for b in below):
+                    allowed.append(name)
+                elif top:  # (a layer below a top one has Cura's single lines only where it differs: they stay)
+                    self.combined_kept += 1
+            self._add_section(name, area)
+            self.layer_sections[name] = area
+        return allowed
+
+    def _add_section(self, mesh: str, area) -> None:
+        """A layer's infill area joins the mesh's recent ones (also for a layer written from an earlier one)."""
+        facts = self._facts(mesh)
+        facts.sections = (*facts.sections, area)[-(self.infill_layers - 1):]
 
     # ------------------------------------------------------------------ helpers
     def _facts(self, mesh: str) -> _MeshFacts:
@@ -584,6 +684,7 @@ class _Run:
     # ------------------------------------------------------------------ per chunk
     def process_chunk(self, text: str) -> str:
         self.chunks_seen += 1
+        self.layer_sections = {}
         words = layer_words(text) if self.repeats is not None and text.startswith(";LAYER:") else None
         repeat_key = None
         if words is not None:
@@ -618,6 +719,18 @@ class _Run:
         edits: list = []
         if parse.number is not None:
             self.report.layers_total += 1
+            if not self.keep_cura and self.s.infill_layers is None and self.infill_layers < 2:
+                found = self._combined_infill_in(parse)
+                if found >= 2:
+                    self.infill_layers = found
+                    # (what earlier layers recorded was decided without the groups: not to be repeated,
+                    # nor is this layer, decided before its group was known)
+                    if self.repeats is not None:
+                        self.repeats = RepeatCache()
+                    words = None
+                    self.report.warnings.append(
+                        f"layer {parse.number} prints infill {found} layers high (Cura's Infill Layer Thickness): "
+                        "only layers whose group of layers has one section are replaced")
             todo = [b for b in parse.blocks if b.has_moves and self.s.enabled(b.mesh)] if not self.keep_cura else []
             if not todo:
                 self.report.layers_kept += 1
@@ -669,7 +782,11 @@ class _Run:
 
     def _learned(self) -> tuple:
         """What this run has learned so far that a layer's result depends on (retraction, per-mesh figures)."""
+        combined = (self.infill_layers, tuple((name, tuple(_digest(a) for a in facts.sections))
+                                              for name, facts in self.meshes.items() if facts.sections)
+                    ) if self.infill_layers >= 2 else ()
         return (
+            combined,
             tuple(vars(self.retraction).values()),
             self.any_lw,
             tuple((name, facts.learned()) for name, facts in self.meshes.items() if facts.learned() != _NOTHING_LEARNED),
@@ -702,6 +819,7 @@ class _Run:
             time1 - time0,
         )
         record.extra["regions"] = sections
+        record.extra["sections"] = dict(self.layer_sections)
         self.repeats.put(key, record)
         # The layer has taught the run its retraction and per-mesh figures (each learned once, from
         # this layer's own lines, and used by it): the same layer met again with them gives this result.
@@ -735,6 +853,8 @@ class _Run:
             self._tally(name, target, length, area)
         self.time_delta += dt
         vars(self.retraction).update(vars(record.retraction_after))
+        for mesh, section in record.extra["sections"].items():
+            self._add_section(mesh, section)
         if not record.blocks and not (record.time_lines and self.time_delta != 0.0):
             return text
         return out
@@ -747,7 +867,7 @@ class _Run:
             h = self.info.layer_height or min(z, 0.2)
         return z - h / 2
 
-    def _density_of(self, mesh: str, fill: np.ndarray, lw: float, area) -> float:
+    def _density_of(self, mesh: str, fill: np.ndarray, lw: float, area, alone: bool = False) -> float:
         ms = self.s.mesh(mesh)
         if ms is not None and ms.density is not None:
             return ms.density
@@ -759,7 +879,7 @@ class _Run:
         facts = self._facts(mesh)
         d = facts.density
         if d is None:
-            d = self._infill_density(fill, lw, area.area if area is not None else None)
+            d = self._infill_density(fill, lw, area.area if area is not None else None, by_length=alone)
             if d is None:
                 return 0.2
             if len(fill) >= 12:
@@ -768,7 +888,10 @@ class _Run:
             # Cura made this mesh's infill denser from here on (gradual infill's steps under a top
             # surface): never print less than it does.
             here = self._infill_density(fill, lw)
-            if here is not None and here > 1.25 * d and family_spacings(fill, lw) is not None:
+            # (and their length says so too: paired lines read as a spacing print no denser)
+            here_whole = self._infill_density(fill, lw, area.area if area is not None else None, by_length=alone)
+            if (here is not None and here > 1.25 * d and here_whole is not None and here_whole > 1.25 * d
+                    and family_spacings(fill, lw) is not None):
                 d = facts.density = here
         return d
 
@@ -782,6 +905,9 @@ class _Run:
         wanted = self.footer.infill_density(self._facts(mesh).extruder or 0)
         if wanted is None or wanted <= 0.0:
             return None
+        pattern = self.s.infill_pattern or self.footer.infill_pattern(self._facts(mesh).extruder or 0)
+        if pattern in _PAIRED_LINE_PATTERNS:
+            return wanted
         spacings = family_spacings(fill, lw) if len(fill) >= 12 else None
         if spacings is not None and abs(sum(lw / sp for sp in spacings) - wanted) > 0.25 * wanted:
             return None
@@ -809,12 +935,15 @@ class _Run:
                 facts.region_density = d
         return d
 
-    def _infill_density(self, fill: np.ndarray, lw: float, area: float | None = None) -> float | None:
+    def _infill_density(self, fill: np.ndarray, lw: float, area: float | None = None,
+                        by_length: bool = False) -> float | None:
         """`infill_density`, remembered for the layer by the lines themselves.
 
         A mesh's lines are asked up to four times in its layer (the closing reach, the modifier
         split, the mesh's and the region's density).  With families found the area plays no part,
-        so one look at the lines answers every area; only the fallback (no families) uses it.
+        so one look at the lines answers every area; only the fallback (no families) uses it, and
+        `by_length` (the lines are all of `area`'s: no modifier takes part of it), where the spacing
+        reads far denser than the length.
         """
         key = (fill.dtype.str, fill.shape, fill.tobytes(), lw)
         hit = self.layer_densities.get(key)
@@ -822,6 +951,13 @@ class _Run:
             hit = self.layer_densities[key] = (infill_density(fill, lw),)
         if hit[0] is None and area:
             return infill_density(fill, lw, area)
+        if (by_length and hit[0] is not None and area and not self.gradual_steps
+                and area >= (_WIDE_AREA_SPACINGS * lw / hit[0]) ** 2):
+            # Octet, quarter cubic and cross infill pair their lines up at varying gaps: the gaps
+            # read as a spacing print far denser than the lines' length over the area says they do
+            by_length = float(np.hypot(*(fill[:, 1] - fill[:, 0]).T).sum() * lw / area)
+            if hit[0] > _SPACING_OVER_LENGTH * by_length:
+                return by_length
         return hit[0]
 
     def _layer(self, parse: LayerParse):
@@ -832,6 +968,8 @@ class _Run:
             steps = self._mesh_steps(parse)
         parent_of = self._modifiers_of(steps)
         hosts = [n for n in steps if self.s.enabled(n) and n not in parent_of]
+        if self.infill_layers >= 2:
+            hosts = self._combined_hosts(parse, steps, hosts)
         if not hosts:
             return None, 0.0, {}
         for name in hosts:
@@ -918,7 +1056,8 @@ class _Run:
                 out.stats["cura_infill_kept_mm"] += float(np.hypot(*(g.fill[:, 1] - g.fill[:, 0]).T).sum())
                 out.stats["layers_with_cura_infill_kept"] = 1
             return None
-        density = self._density_of(st.name, g.fill, lw, area)
+        # (Cura's lines of a mesh with modifiers cover only part of its area: their length says nothing)
+        density = self._density_of(st.name, g.fill, lw, area, alone=not children)
         if density <= 0.0:
             return None  # a 0 % mesh has no infill (Cura made none)
         # 0 % regions are "no infill there": cut out of the area, not given to the engine
@@ -1368,6 +1507,12 @@ class _Run:
         r.filament_after_mm = before + sum(self.e_delta.values())
         r.time_before_s = self.survey.last_time_elapsed or 0.0
         r.time_after_s = r.time_before_s + self.time_delta
+        if self.combined_kept:
+            r.warnings.append(
+                f"Cura's infill kept in {self.combined_kept} layer(s): Cura's Infill Layer Thickness prints it "
+                f"{self.infill_layers} layers high, and there the section grows over the layers below (new infill "
+                "would lie over their walls). Set Infill Layer Thickness to the layer height to have it replaced "
+                "everywhere")
         names = ["base", *[n for n in self.tally if n != "base"]]
         for name in names:
             t = self.tally.get(name)
@@ -1377,6 +1522,13 @@ class _Run:
             r.regions.append(RegionReport(name, t.target, measured, t.area, t.layers))
         return patch_header(header, self.time_delta, self.e_before, self.e_delta, self.s, volumetric=self.info.volumetric,
                             layers=(r.layers_processed, r.layers_kept, len(r.failed_layers)))
+
+
+def _digest(area) -> bytes:
+    """A short digest of an area's geometry (its vertices to 0.001 mm)."""
+    parts = [np.round(np.asarray(ring.coords), 3).tobytes() for p in polygons_of(area)
+             for ring in (p.exterior, *p.interiors)]
+    return hashlib.blake2b(b"|".join(parts), digest_size=16).digest()
 
 
 def _host_blocks(blocks: list, names: set) -> tuple[list[int], list[int], tuple | None]:

@@ -71,6 +71,11 @@ class ProcessSettings:
     # Cura's gradual_infill_steps (None: from the settings footer): the pass replaces gradual infill
     # with uniform infill at the full density, and says so
     gradual_infill_steps: int | None = None
+    # how many layers Cura's infill is combined over (its Infill Layer Thickness over the layer height;
+    # None: from the settings footer, and the G-code's own extrusion): 2 or more keeps Cura's infill
+    infill_layers: int | None = None
+    # Cura's Infill as Support (infill_support_enabled; None: from the settings footer): kept as Cura made it
+    infill_support: bool | None = None
 
     def validate(self) -> None:
         """Raise ValueError with a clear message for impossible values."""

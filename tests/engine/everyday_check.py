@@ -643,6 +643,25 @@ class _GrownSections:
         return self._last_grown
 
 
+def _segment_keys(segments: np.ndarray) -> np.ndarray:
+    """One key per segment (k, 2, 2), the same whichever way it runs (ends to 0.001 mm)."""
+    ends = np.round(segments, 3).reshape(-1, 4)
+    swap = (ends[:, 0] > ends[:, 2]) | ((ends[:, 0] == ends[:, 2]) & (ends[:, 1] > ends[:, 3]))
+    canonical = np.ascontiguousarray(np.where(swap[:, None], ends[:, [2, 3, 0, 1]], ends))
+    return canonical.view(np.dtype((np.void, canonical.dtype.itemsize * 4))).ravel()
+
+
+def _same_segments(segments: np.ndarray, cura: np.ndarray) -> np.ndarray:
+    """Which of `segments` (k, 2, 2) are one of Cura's own (m, 2, 2), either way round: bool (k,)."""
+    return np.isin(_segment_keys(segments), _segment_keys(cura))
+
+
+def _samples_per_segment(segments: np.ndarray, step: float) -> np.ndarray:
+    """How many points `sample_segments(segments, step)` puts on each segment: int (k,)."""
+    delta = segments[:, 1] - segments[:, 0]
+    return np.maximum(1, np.ceil(np.hypot(delta[:, 0], delta[:, 1]) / step).astype(int))
+
+
 def _check_layer(key: tuple[int, int], z: float, layer_height: float, original: LayerMoves | None,
                  new_fill: np.ndarray, reference_fill: np.ndarray, material: _GrownSections,
                  spacing: float, line_width: float) -> _LayerFindings:
@@ -661,8 +680,11 @@ def _check_layer(key: tuple[int, int], z: float, layer_height: float, original: 
     new_points, new_weights = sample_segments(new_fill, step)
     new_mm = float(new_weights.sum())
 
-    # 1 containment
+    # 1 containment (Cura's own lines, kept as they were, are where Cura prints by definition: the
+    # reference slice's own single lines of combined infill layers need not agree with them)
     outside = ~_inside(allowed, new_points)
+    if len(original_fill) and outside.any():
+        outside &= ~np.repeat(_same_segments(new_fill, original_fill), _samples_per_segment(new_fill, step))
     outside_mm = float(new_weights[outside].sum())
 
     # 3 skin: Cura's skin lines that are not infill area; such points are outside `allowed` already
@@ -724,7 +746,8 @@ def check_everyday(original: str, processed: str, reference: str, section_at: Ca
 
     Layers are matched by their ``;LAYER:`` number (and, when numbers restart,
     by occurrence).  "New FILL" is every extruding FILL move of `processed`
-    (infill the pass kept is Cura's, hence inside by definition).  Per layer:
+    (infill the pass kept is Cura's, hence inside by definition: check 1 leaves out the moves that are
+    one of Cura's own in that layer).  Per layer:
 
     1. containment: new FILL length outside the *allowed area* = the reference
        layer's FILL segments buffered by ``line_width`` (the reference area,

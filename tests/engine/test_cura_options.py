@@ -4,6 +4,9 @@
   layers as one line twice as high in the upper layer, and single lines only where the sections
   differ.  The pass keeps Cura's infill and says so, from the settings footer, and without it from the
   G-code's own extrusion; the everyday checker finds nothing printed where Cura does not print.
+* **Infill as Support** (infill only under the top surfaces it holds up): its lines do not show how far
+  that reaches; with the footer the pass keeps Cura's infill and says so (a dome: 22 % of the new
+  infill was outside Cura's area before).
 * **Infill patterns whose lines pair up** (octet, quarter cubic, cross, cross 3D): one layer's lines
   come in pairs whose gap changes from layer to layer, so their spacing does not tell the density.
   With the footer the pass prints its density; without it, what the lines' length says.
@@ -92,6 +95,20 @@ def test_infill_layer_thickness(option_slices, name, footer, version):
         assert any("Infill Layer Thickness prints it 2 layers high" in w and "grows" in w
                    for w in report.warnings), report.warnings
         assert abs(report.filament_after_mm / report.filament_before_mm - 1.0) < 0.01, report.format_table()
+
+
+SUPPORT_CASE = _case("dome", {"infill_support_enabled": True, "infill_support_angle": 40}, "infill as support")
+
+
+@pytest.mark.parametrize("version", ENGINES)
+def test_infill_as_support_keeps_cura_s_infill(option_slices, version):
+    sliced = _slice(option_slices, SUPPORT_CASE, version)
+    original, processed, report, result = _process(sliced, footer=True)
+    assert result.ok, result.report()
+    assert report.layers_processed == 0
+    assert any("Infill as Support" in w for w in report.warnings), report.warnings
+    assert [line for line in processed.splitlines() if not line.startswith(";DELAUNAYINFILL_PROCESSED")] \
+        == original.splitlines()
 
 
 PATTERN_CASES = [_case("dome", {"infill_pattern": p}, f"{p} infill") for p in PAIRED_PATTERNS]

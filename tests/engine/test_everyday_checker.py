@@ -226,6 +226,32 @@ def test_infill_over_skin_fails_containment_and_reports_on_skin():
     assert not any(p.startswith("material") for p in result.problems)
 
 
+def test_cura_s_own_lines_kept_are_not_counted_outside_but_a_new_line_there_is():
+    """A line Cura itself printed in that layer (Cura's single lines of combined infill, which the dense
+    reference slice need not print in the same places) is where Cura prints; the same line moved is not."""
+    model = ring()
+    walls = outline_segments(model.section.buffer(-LINE_WIDTH / 2, join_style=2))
+    # a Cura FILL line in the walls' zone of layer 5: inside the part, outside the reference's infill area
+    extra = np.array([[[100.1, 102.0], [100.1, 118.0]]])
+
+    def files(new_extra):
+        original, processed, reference = [], [], []
+        for number in range(model.layers):
+            cura_fill = hatch(model.infill, SPACING, model.angle(number))
+            dense = hatch(model.infill, LINE_WIDTH, 0.0 if number % 2 == 0 else 90.0)
+            own = np.concatenate([cura_fill, extra]) if number == 5 else cura_fill
+            new = np.concatenate([cura_fill, new_extra]) if number == 5 else cura_fill
+            original.append([("WALL-OUTER", walls), ("FILL", own)])
+            processed.append([("WALL-OUTER", walls), ("FILL", new)])
+            reference.append([("WALL-OUTER", walls), ("FILL", dense)])
+        return write_gcode(original), write_gcode(processed), write_gcode(reference)
+
+    kept = ec.check_everyday(*files(extra[:, ::-1]), model.section_at, SPACING, LINE_WIDTH)  # (either way round)
+    assert kept.figures["outside_mm"] == 0, kept.report()
+    moved = ec.check_everyday(*files(extra + np.array([0.1, 0.0])), model.section_at, SPACING, LINE_WIDTH)
+    assert moved.figures["outside_mm"] > 10.0, moved.report()
+
+
 def test_an_island_without_infill_fails_the_island_check():
     model = two_pillars()
     right_pillar = box(110, 0, 200, 200)

@@ -40,3 +40,28 @@ def test_touching_lines_are_not_read_as_groups():
     fill = grid_lines(w, 1, w, extent=10.0)
     one_family = fill[: len(fill) // 2]
     assert infill_density(one_family, w) == pytest.approx(1.0, rel=0.03)
+
+
+def _walls_layer(walls: int, width: float = 0.4, side: float = 30.0) -> str:
+    """One Cura layer of a square part: its outer wall, then `walls - 1` inner walls a width apart each."""
+    lines, e = [";LAYER:3", "G0 F6000 X0 Y0 Z0.8"], 0.0
+    for k in range(walls):
+        kind = "WALL-OUTER" if k == 0 else "WALL-INNER"
+        inset = width / 2 + k * width
+        corners = [(inset, inset), (side - inset, inset), (side - inset, side - inset), (inset, side - inset)]
+        lines += [f";TYPE:{kind}", ";MESH:part.stl", f"G0 F6000 X{corners[0][0]:.3f} Y{corners[0][1]:.3f}"]
+        for x, y in corners[1:] + corners[:1]:
+            e += 0.03
+            lines.append(f"G1 F1500 X{x:.3f} Y{y:.3f} E{e:.5f}")
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("walls", [2, 3, 4, 6])
+def test_the_line_width_is_the_first_inner_wall_s_distance_however_many_walls(walls):
+    """The inner walls lie one, two, ... widths inside the outer one: with four walls the median of all
+    their distances read 0.8 mm for 0.4 mm lines (and the CLI printed the cup's 20 % as 40 %)."""
+    from DelaunayInfill.gcode.infer import wall_line_width
+    from DelaunayInfill.gcode.read import MachineState, RetractionModel, parse_layer
+
+    parse = parse_layer(_walls_layer(walls), MachineState(), RetractionModel())
+    assert wall_line_width(parse, "part.stl") == pytest.approx(0.4, abs=0.01)

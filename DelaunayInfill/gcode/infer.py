@@ -68,7 +68,9 @@ def wall_line_width(parse: LayerParse, mesh: str) -> float | None:
     """Centre distance between the outer wall and the first inner wall, mm.
 
     Cura puts the first inner wall (w0 + wx) / 2 inside the outer one; with
-    equal widths that is the line width.  None without both walls.
+    equal widths that is the line width.  None without both walls.  Of the
+    inner walls' distances to the outer wall, the lowest cluster (around their
+    0.15 quantile) is the first inner wall's.
     """
     m = parse.moves
     in_mesh = parse.mesh_mask(mesh)
@@ -82,7 +84,13 @@ def wall_line_width(parse: LayerParse, mesh: str) -> float | None:
     d = d[np.isfinite(d)]
     if d.size < 5:
         return None
-    w = float(np.median(d))
+    # With three or more walls the inner walls lie one, two, ... widths in: the first inner wall's
+    # distance is the lowest cluster (the median of all of them read 0.8 mm for 4 walls of 0.4 mm)
+    w, low = float(np.median(d)), _quantile(d, 0.15)
+    if w > 1.25 * low:
+        cluster = d[(d >= 0.8 * low) & (d <= 1.25 * low)]
+        if cluster.size >= 0.1 * d.size:
+            w = float(np.median(cluster))
     return w if 0.05 <= w <= 3.0 else None
 
 

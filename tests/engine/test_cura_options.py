@@ -97,6 +97,23 @@ def test_infill_layer_thickness(option_slices, name, footer, version):
         assert abs(report.filament_after_mm / report.filament_before_mm - 1.0) < 0.01, report.format_table()
 
 
+WALL_CASES = [_case("cup", {"infill_pattern": "cubic", "wall_line_count": 4}, "4 walls"),
+              _case("side_text", {"wall_line_count": 6}, "6 walls")]
+
+
+@pytest.mark.parametrize("version", ENGINES)
+@pytest.mark.parametrize("case", WALL_CASES, ids=lambda c: c.exercises.replace(" ", "-"))
+def test_many_walls_give_the_line_width_and_the_density(option_slices, case, version):
+    """The inner walls lie one, two, ... widths in: the line width is the first one's distance (the
+    median of all of them read 0.8 mm for 4 walls and 1.2 mm for 6, and the reports 40 % and 60 %)."""
+    sliced = _slice(option_slices, case, version)
+    _, _, report, result = _process(sliced, footer=True)
+    assert result.ok, result.report()
+    assert report.line_width_found == pytest.approx(0.4, abs=0.01)
+    assert report.regions[0].target == pytest.approx(DENSITY / 100)
+    assert 0.16 <= report.regions[0].measured <= 0.21, report.format_table()
+
+
 SUPPORT_CASE = _case("dome", {"infill_support_enabled": True, "infill_support_angle": 40}, "infill as support")
 
 

@@ -165,3 +165,10 @@ def test_cura_s_infill_as_support_reaches_the_pass():
     assert settings.infill_support is True
     settings, _ = build_settings(_snapshot([_model("star.stl")]))
     assert settings.infill_support is False
+
+
+def test_cura_s_infill_wall_line_count_reaches_the_pass():
+    settings, _ = build_settings(_snapshot([_model("star.stl", infill_wall_line_count=2)]))
+    assert settings.infill_wall_lines == 2
+    settings, _ = build_settings(_snapshot([_model("star.stl")]))
+    assert settings.infill_wall_lines == 0

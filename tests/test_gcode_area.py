@@ -29,7 +29,7 @@ from shapely.geometry import LineString, MultiLineString, MultiPoint, MultiPolyg
 from shapely.ops import polygonize, unary_union
 
 from DelaunayInfill.gcode import ProcessSettings, process
-from DelaunayInfill.gcode.area import median_of, sample_segments
+from DelaunayInfill.gcode.area import closed_loops, median_of, sample_segments
 from DelaunayInfill.gcode.infer import nearest_sample_distance
 from DelaunayInfill.gcode.read import (
     WALL_INNER,
@@ -498,3 +498,21 @@ def test_fraction_inside_memo_keeps_lines_of_the_same_shape_apart(monkeypatch):
         assert run._fraction_inside(inside, area, 0.4) == 1.0
         assert run._fraction_inside(outside, area, 0.4) == 0.0
     assert len(calls) == 2, "each set of lines is measured once, however they alternate"
+
+
+def test_closed_loops_are_the_runs_that_come_back_to_their_start():
+    """Cura's infill walls: closed FILL runs; open runs (the infill lines) are not taken."""
+    square = np.array([[0, 0], [10, 0], [10, 10], [0, 10], [0, 0]], dtype=float)
+    loop = np.stack([square[:-1], square[1:]], axis=1)  # 4 segments, last end = first start
+    zigzag = np.array([[[1, 1], [9, 1]], [[9, 1], [9, 2]], [[9, 2], [1, 2]]], dtype=float)  # open
+    line = np.array([[[2, 5], [8, 5]]], dtype=float)
+    segments = np.concatenate([zigzag, loop, line, loop + 20.0])
+    loops, in_loops = closed_loops(segments)
+    assert len(loops) == 2
+    np.testing.assert_allclose(loops[0], square)
+    np.testing.assert_allclose(loops[1], square + 20.0)
+    assert in_loops.tolist() == [False] * 3 + [True] * 4 + [False] + [True] * 4
+    # a loop left 0.2 mm open is no loop
+    opened = loop.copy()
+    opened[-1, 1] += 0.2
+    assert closed_loops(opened)[0] == []

@@ -140,6 +140,7 @@ def build_settings(snapshot):
         gradual_infill_steps=int(_number(primary.values.get("gradual_infill_steps"), 0.0)),
         infill_layers=infill_layers,
         infill_support=bool(primary.values.get("infill_support_enabled")),
+        infill_wall_lines=int(_number(primary.values.get("infill_wall_line_count"), 0.0)),
         meshes=meshes,
         process_unlisted_meshes=False,
         filament_diameter=_number(extruder.get("material_diameter")),

@@ -25,6 +25,7 @@ MESH_KEYS = (
     "gradual_infill_steps",
     "infill_sparse_thickness",
     "infill_support_enabled",
+    "infill_wall_line_count",
     "speed_infill",
     "acceleration_infill",
     "jerk_infill",

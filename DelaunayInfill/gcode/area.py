@@ -207,6 +207,39 @@ def skin_region(runs: list[np.ndarray], line_width: float):
     return to_multipolygon(grown.buffer(-reach, 4))
 
 
+def closed_loops(segments: np.ndarray, tolerance: float = 0.05) -> tuple[list[np.ndarray], np.ndarray]:
+    """The closed polylines among segments printed one after another (Cura's infill walls).
+
+    Parameters
+    ----------
+    segments : ndarray, shape (k, 2, 2)
+        Extrusion segments in the order printed, mm.
+    tolerance : float
+        How close a run's last point comes back to its first, mm.
+
+    Returns
+    -------
+    loops : list of ndarray, each shape (m, 2)
+        The closed runs as polylines (last point = first, within `tolerance`).
+    in_loops : ndarray of bool, shape (k,)
+        Which segments belong to them.
+    """
+    in_loops = np.zeros(len(segments), dtype=bool)
+    if len(segments) < 3:
+        return [], in_loops
+    joined = np.zeros(len(segments), dtype=bool)
+    joined[1:] = (np.abs(segments[1:, 0] - segments[:-1, 1]) < 1e-6).all(axis=1)
+    starts = np.flatnonzero(~joined)
+    stops = np.r_[starts[1:], len(segments)]
+    gap = segments[stops - 1, 1] - segments[starts, 0]
+    closed = ((stops - starts) >= 3) & (np.hypot(gap[:, 0], gap[:, 1]) < tolerance)
+    loops = []
+    for a, b in zip(starts[closed].tolist(), stops[closed].tolist()):  # (a few loops a layer)
+        loops.append(np.vstack([segments[a:b, 0], segments[b - 1 : b, 1]]))
+        in_loops[a:b] = True
+    return loops, in_loops
+
+
 def sample_segments(segments: np.ndarray, step: float) -> np.ndarray:
     """Points along segments at most `step` apart, ends included.
 

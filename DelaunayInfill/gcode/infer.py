@@ -68,9 +68,8 @@ def wall_line_width(parse: LayerParse, mesh: str) -> float | None:
     """Centre distance between the outer wall and the first inner wall, mm.
 
     Cura puts the first inner wall (w0 + wx) / 2 inside the outer one; with
-    equal widths that is the line width.  None without both walls.  Of the
-    inner walls' distances to the outer wall, the lowest cluster (around their
-    0.15 quantile) is the first inner wall's.
+    equal widths that is the line width.  None without both walls.  Measured
+    from the outer wall's samples to the nearest inner wall.
     """
     m = parse.moves
     in_mesh = parse.mesh_mask(mesh)
@@ -80,17 +79,14 @@ def wall_line_width(parse: LayerParse, mesh: str) -> float | None:
     inner = _segments_of(runs_of(parse, extr & (m["kind"] == WALL_INNER)))
     if len(outer) == 0 or len(inner) == 0:
         return None
-    d = nearest_sample_distance(outer, 0.02, sample_segments(inner, 0.5), 3.0)
+    # From the outer wall's samples to the nearest inner wall: that is the first inner wall however many
+    # walls lie further in (from the inner walls' samples out, the median read 0.8 mm for 4 walls of 0.4
+    # mm), and a fuzzy-skin outer wall's jitter evens out round it
+    d = nearest_sample_distance(inner, 0.02, sample_segments(outer, 0.5), 3.0)
     d = d[np.isfinite(d)]
     if d.size < 5:
         return None
-    # With three or more walls the inner walls lie one, two, ... widths in: the first inner wall's
-    # distance is the lowest cluster (the median of all of them read 0.8 mm for 4 walls of 0.4 mm)
-    w, low = float(np.median(d)), _quantile(d, 0.15)
-    if w > 1.25 * low:
-        cluster = d[(d >= 0.8 * low) & (d <= 1.25 * low)]
-        if cluster.size >= 0.1 * d.size:
-            w = float(np.median(cluster))
+    w = float(np.median(d))
     return w if 0.05 <= w <= 3.0 else None
 
 

@@ -21,9 +21,25 @@ import numpy as np
 from shapely.geometry import box as shapely_box
 
 from ..combing import CombingArea
-from ..geometry import contains_xy, covers, empty_area, polygons_of, to_multipolygon, unary_union
+from ..geometry import (
+    contains_xy,
+    covers,
+    empty_area,
+    multilinestring_of,
+    polygons_of,
+    to_multipolygon,
+    unary_union,
+)
 from ..routing import TravelCost, order_paths, plan_runs
-from .area import AreaCache, MeshLayer, fraction_inside, mesh_layer, sample_segments, segments_of
+from .area import (
+    AreaCache,
+    MeshLayer,
+    closed_loops,
+    fraction_inside,
+    mesh_layer,
+    sample_segments,
+    segments_of,
+)
 from .emit import EmitParams, emit_block
 from .estimate import move_seconds, move_times
 from .footer import read_footer
@@ -530,6 +546,11 @@ class _Run:
             found = [self.footer.number("gradual_infill_steps", e) for e in range(max(1, len(self.footer.extruder_values)))]
             steps = int(max([v for v in found if v is not None], default=0))
         self.gradual_steps = steps
+        walls = settings.infill_wall_lines
+        if walls is None:
+            found = [self.footer.number("infill_wall_line_count", e) for e in range(max(1, len(self.footer.extruder_values)))]
+            walls = int(max([v for v in found if v is not None], default=0))
+        self.infill_walls = walls  # Cura's Infill Wall Line Count: its closed FILL loops are kept
         if steps > 0 and not self.keep_cura:
             self.report.warnings.append(
                 f"Cura's gradual infill ({steps} step{'s' if steps > 1 else ''}) is replaced by uniform infill at its "
@@ -1060,6 +1081,12 @@ class _Run:
         density = self._density_of(st.name, g.fill, lw, area, alone=not children)
         if density <= 0.0:
             return None  # a 0 % mesh has no infill (Cura made none)
+        # Cura's Infill Wall Line Count: closed FILL loops round the infill area stay as Cura printed
+        # them, and the new infill fills what they enclose
+        infill_walls, in_walls = closed_loops(g.fill) if self.infill_walls > 0 else ([], None)
+        if infill_walls:
+            with clock("areas"):
+                area = to_multipolygon(area.difference(multilinestring_of(infill_walls).buffer(lw / 2 + 1e-3, 4)))
         # 0 % regions are "no infill there": cut out of the area, not given to the engine
         full_area = area
         region_list, empty, empty_parts = _split_empty_regions(region_list)
@@ -1080,7 +1107,7 @@ class _Run:
                 self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
         reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
         with clock("Cura's lines kept"):
-            paths = self._with_cura_kept(st, children, area, paths, reach, empty, start, out)
+            paths = self._with_cura_kept(st, children, area, paths, reach, empty, start, out, infill_walls, in_walls)
         for part, zname in empty_parts:
             self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
         travel_part = g.part if g.part is not None else area.buffer(lw / 2)
@@ -1106,14 +1133,15 @@ class _Run:
         return zones
 
     def _with_cura_kept(self, st: _MeshStep, children: list, area, paths: list, reach: float, empty, start,
-                        out: _LayerOut) -> list:
+                        out: _LayerOut, infill_walls: list = (), in_walls=None) -> list:
         """`paths` with Cura's lines where the new infill does not take over, all in print order.
 
-        Those lines (a part not confirmed, an island too small for the pattern) are printed as Cura
-        printed them, on the route with the new paths; `out` counts them.
+        Those lines (a part not confirmed, an island too small for the pattern, Cura's infill walls)
+        are printed as Cura printed them, on the route with the new paths; `out` counts them.
         """
-        cura_fill = np.concatenate([st.geo.fill, *(c.geo.fill for c in children)])
-        kept = kept_cura_pieces(cura_fill, area, paths, st.line_width, reach, empty)
+        own = st.geo.fill if in_walls is None else st.geo.fill[~in_walls]
+        cura_fill = np.concatenate([own, *(c.geo.fill for c in children)])
+        kept = [*kept_cura_pieces(cura_fill, area, paths, st.line_width, reach, empty), *infill_walls]
         if kept:
             paths, _ = order_paths([*paths, *kept], start)
         out.stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))

@@ -76,6 +76,8 @@ class ProcessSettings:
     infill_layers: int | None = None
     # Cura's Infill as Support (infill_support_enabled; None: from the settings footer): kept as Cura made it
     infill_support: bool | None = None
+    # Cura's Infill Wall Line Count (None: from the settings footer): its walls round the infill stay
+    infill_wall_lines: int | None = None
 
     def validate(self) -> None:
         """Raise ValueError with a clear message for impossible values."""

@@ -543,14 +543,11 @@ class _Run:
                 "it replaced")
         steps = settings.gradual_infill_steps
         if steps is None:
-            found = [self.footer.number("gradual_infill_steps", e) for e in range(max(1, len(self.footer.extruder_values)))]
-            steps = int(max([v for v in found if v is not None], default=0))
+            steps = self._footer_count("gradual_infill_steps")
         self.gradual_steps = steps
-        walls = settings.infill_wall_lines
-        if walls is None:
-            found = [self.footer.number("infill_wall_line_count", e) for e in range(max(1, len(self.footer.extruder_values)))]
-            walls = int(max([v for v in found if v is not None], default=0))
-        self.infill_walls = walls  # Cura's Infill Wall Line Count: its closed FILL loops are kept
+        # Cura's Infill Wall Line Count: its closed FILL loops are kept
+        self.infill_walls = (settings.infill_wall_lines if settings.infill_wall_lines is not None
+                             else self._footer_count("infill_wall_line_count"))
         if steps > 0 and not self.keep_cura:
             self.report.warnings.append(
                 f"Cura's gradual infill ({steps} step{'s' if steps > 1 else ''}) is replaced by uniform infill at its "
@@ -563,6 +560,11 @@ class _Run:
         self.lw_warned = False
         self.any_lw: float | None = None
         self.measured_lw: float | None = None
+
+    def _footer_count(self, key: str) -> int:
+        """The largest whole-number value of a setting over the footer's extruders (0: not there)."""
+        found = [self.footer.number(key, e) for e in range(max(1, len(self.footer.extruder_values)))]
+        return int(max([v for v in found if v is not None], default=0))
 
     # ------------------------------------------------------------------ combined infill layers
     # Cura's Infill Layer Thickness (N layers): Cura moves the infill that N layers share up into the top
@@ -590,18 +592,23 @@ class _Run:
         fill_rate, wall_rate = e_per_mm(parse, fill), e_per_mm(parse, walls)
         return fill_rate / wall_rate if fill_rate and wall_rate else None
 
+    def _layers_high(self, parse: LayerParse, mesh: str) -> float | None:
+        """How many layers high a mesh's FILL in this layer is: its E per mm against its walls' over the
+        lowest such ratio of its layers so far (this one's included; None: no FILL or no walls here)."""
+        ratio = self._fill_wall_ratio(parse, mesh)
+        if ratio is None:
+            return None
+        facts = self._facts(mesh)
+        facts.fill_wall_ratio = ratio if facts.fill_wall_ratio is None else min(facts.fill_wall_ratio, ratio)
+        return ratio / facts.fill_wall_ratio
+
     def _combined_infill_in(self, parse: LayerParse) -> int:
-        """How many layers a mesh's FILL in this layer is as high as (against the layers before: 1 for none),
-        from its E per mm against its walls'."""
+        """How many layers high the highest FILL of this layer is, against the layers before (1: none)."""
         most = 1
         for mesh in parse.meshes:
-            ratio = self._fill_wall_ratio(parse, mesh)
-            if ratio is None:
-                continue
-            facts = self._facts(mesh)
-            if facts.fill_wall_ratio is not None and ratio > _COMBINED_RATIO * facts.fill_wall_ratio:
-                most = max(most, int(round(ratio / facts.fill_wall_ratio)))
-            facts.fill_wall_ratio = ratio if facts.fill_wall_ratio is None else min(facts.fill_wall_ratio, ratio)
+            high = self._layers_high(parse, mesh)
+            if high is not None and high > _COMBINED_RATIO:
+                most = max(most, int(round(high)))
         return most
 
     def _combined_hosts(self, parse: LayerParse, steps: dict, hosts: list) -> list:
@@ -611,10 +618,8 @@ class _Run:
         allowed = []
         for name, st in steps.items():
             facts = self._facts(name)
-            ratio = self._fill_wall_ratio(parse, name)
-            if ratio is not None:
-                facts.fill_wall_ratio = ratio if facts.fill_wall_ratio is None else min(facts.fill_wall_ratio, ratio)
-            top = ratio is not None and ratio > _COMBINED_RATIO * facts.fill_wall_ratio
+            high = self._layers_high(parse, name)
+            top = high is not None and high > _COMBINED_RATIO
             area = st.geo.area
             below = facts.sections[-(n - 1):]
             if name in hosts:

@@ -207,6 +207,15 @@ def skin_region(runs: list[np.ndarray], line_width: float):
     return to_multipolygon(grown.buffer(-reach, 4))
 
 
+def run_bounds(segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the runs of segments printed one after another start and stop (each starting where the
+    last ended): (starts, stops) indices into `segments` (k, 2, 2), the run being ``segments[a:b]``."""
+    joined = np.zeros(len(segments), dtype=bool)
+    joined[1:] = (np.abs(segments[1:, 0] - segments[:-1, 1]) < 1e-6).all(axis=1)
+    starts = np.flatnonzero(~joined)
+    return starts, np.r_[starts[1:], len(segments)]
+
+
 def closed_loops(segments: np.ndarray, tolerance: float = 0.05) -> tuple[list[np.ndarray], np.ndarray]:
     """The closed polylines among segments printed one after another (Cura's infill walls).
 
@@ -227,10 +236,7 @@ def closed_loops(segments: np.ndarray, tolerance: float = 0.05) -> tuple[list[np
     in_loops = np.zeros(len(segments), dtype=bool)
     if len(segments) < 3:
         return [], in_loops
-    joined = np.zeros(len(segments), dtype=bool)
-    joined[1:] = (np.abs(segments[1:, 0] - segments[:-1, 1]) < 1e-6).all(axis=1)
-    starts = np.flatnonzero(~joined)
-    stops = np.r_[starts[1:], len(segments)]
+    starts, stops = run_bounds(segments)
     gap = segments[stops - 1, 1] - segments[starts, 0]
     closed = ((stops - starts) >= 3) & (np.hypot(gap[:, 0], gap[:, 1]) < tolerance)
     loops = []

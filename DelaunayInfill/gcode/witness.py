@@ -30,7 +30,7 @@ from ..geometry import (
     to_multipolygon,
     unary_union,
 )
-from .area import sample_segments
+from .area import run_bounds, sample_segments
 
 __all__ = ["witnessed", "kept_cura_pieces", "witness_radius"]
 
@@ -83,10 +83,7 @@ def witnessed(area, runs, line_width: float, radius: float):
 
 def _polylines(segments: np.ndarray) -> list[np.ndarray]:
     """Segments, shape (k, 2, 2) mm in the order printed, joined into polylines where one starts at the last's end."""
-    joined = np.zeros(len(segments), dtype=bool)
-    joined[1:] = (np.abs(segments[1:, 0] - segments[:-1, 1]) < 1e-6).all(axis=1)
-    starts = np.flatnonzero(~joined)
-    stops = np.r_[starts[1:], len(segments)]
+    starts, stops = run_bounds(segments)
     return [np.vstack([segments[a:b, 0], segments[b - 1 : b, 1]]) for a, b in zip(starts, stops, strict=True)]
 
 

@@ -546,6 +546,12 @@ def _layer_heights(layers: dict[tuple[int, int], LayerMoves]) -> dict[tuple[int,
 # --------------------------------------------------------------------------- geometry helpers
 
 
+def _samples_per_segment(segments: np.ndarray, step: float) -> np.ndarray:
+    """How many points `sample_segments(segments, step)` puts on each segment: int (k,)."""
+    delta = segments[:, 1] - segments[:, 0]
+    return np.maximum(1, np.ceil(np.hypot(delta[:, 0], delta[:, 1]) / step).astype(int))
+
+
 def sample_segments(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Points along segments, at the midpoints of equal pieces no longer than `step`.
 
@@ -567,7 +573,7 @@ def sample_segments(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.n
         return np.zeros((0, 2)), np.zeros(0)
     delta = segments[:, 1] - segments[:, 0]
     length = np.hypot(delta[:, 0], delta[:, 1])
-    counts = np.maximum(1, np.ceil(length / step).astype(int))
+    counts = _samples_per_segment(segments, step)
     owner = np.repeat(np.arange(len(segments)), counts)
     index_in_segment = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
     t = (index_in_segment + 0.5) / counts[owner]
@@ -654,12 +660,6 @@ def _segment_keys(segments: np.ndarray) -> np.ndarray:
 def _same_segments(segments: np.ndarray, cura: np.ndarray) -> np.ndarray:
     """Which of `segments` (k, 2, 2) are one of Cura's own (m, 2, 2), either way round: bool (k,)."""
     return np.isin(_segment_keys(segments), _segment_keys(cura))
-
-
-def _samples_per_segment(segments: np.ndarray, step: float) -> np.ndarray:
-    """How many points `sample_segments(segments, step)` puts on each segment: int (k,)."""
-    delta = segments[:, 1] - segments[:, 0]
-    return np.maximum(1, np.ceil(np.hypot(delta[:, 0], delta[:, 1]) / step).astype(int))
 
 
 def _check_layer(key: tuple[int, int], z: float, layer_height: float, original: LayerMoves | None,

@@ -11,7 +11,9 @@ its extruder definition, evaluates every formula with the user's overrides
 on top, evaluates per-mesh overrides together with every setting that
 depends on them, and passes the complete result to the engine.
 
-Single-extruder machines only; quality, material and variant profiles are
+One extruder definition per machine: with ``machine_extruder_count`` above 1
+every extruder gets the first one's values (a mesh picks its extruder with a
+per-mesh ``extruder_nr``); quality, material and variant profiles are
 not read (give their values as user settings).  Used by the engine-tier
 tests, the G-code benchmark and ``delaunay-infill demo --reslice``.
 
@@ -564,15 +566,20 @@ def engine_arguments(resolved: ResolvedSettings) -> list[str]:
         args += ["-s", f"{key}={_engine_text(value)}"]
     # -j loads fdmextruder's defaults into extruder 0 and those win over
     # global values, so extruder keys must be given again after -e0.
-    args.append("-e0")
-    for key, value in resolved.extruder_values.items():
-        args += ["-s", f"{key}={_engine_text(value)}"]
+    extruders = max(1, int(resolved.global_values.get("machine_extruder_count") or 1))
+    for number in range(extruders):
+        args.append(f"-e{number}")
+        for key, value in {**resolved.extruder_values, "extruder_nr": number}.items():
+            args += ["-s", f"{key}={_engine_text(value)}"]
     for number, group in enumerate(mesh_groups(resolved)):
         if number:
             args.append("--next")
         for index in group:
             path, values = resolved.meshes[index]
             args += ["-l", path]
+            if extruders > 1:
+                # (a mesh's settings fall back on the extruder named last on the command line, not the first)
+                values = {"extruder_nr": 0, **values}
             for key, value in values.items():
                 args += ["-s", f"{key}={_engine_text(value)}"]
     return args
@@ -664,7 +671,7 @@ def slice_models(
     out_path : path-like
         G-code output; written atomically (a failed slice leaves no file).
     printer : str
-        Machine definition id or path (single extruder).
+        Machine definition id or path (its first extruder definition serves every extruder).
     cwd : path-like, optional
         Folder the engine runs in; relative model paths are relative to it.
         ``;MESH:`` lines show the model path exactly as given, so bare file

@@ -29,7 +29,7 @@ from shapely.geometry import LineString, MultiLineString, MultiPoint, MultiPolyg
 from shapely.ops import polygonize, unary_union
 
 from DelaunayInfill.gcode import ProcessSettings, process
-from DelaunayInfill.gcode.area import closed_loops, median_of, sample_segments
+from DelaunayInfill.gcode.area import closed_loops, median_of, mesh_layer, sample_segments, without_foreign
 from DelaunayInfill.gcode.infer import nearest_sample_distance
 from DelaunayInfill.gcode.read import (
     WALL_INNER,
@@ -516,3 +516,72 @@ def test_closed_loops_are_the_runs_that_come_back_to_their_start():
     opened = loop.copy()
     opened[-1, 1] += 0.2
     assert closed_loops(opened)[0] == []
+
+
+def _square_ring(x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
+    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]], dtype=float)
+
+
+def _layer_gcode(blocks: list) -> str:
+    """One layer of G-code: blocks of (mesh, feature type, [polyline (k, 2), ...]), absolute E."""
+    out, e = [";LAYER:3", "G0 Z1.0"], 0.0
+    for mesh, kind, polylines in blocks:
+        out += [f";MESH:{mesh}", f";TYPE:{kind}"]
+        for line in polylines:
+            out.append(f"G0 X{line[0, 0]:.3f} Y{line[0, 1]:.3f}")
+            for a, b in zip(line[:-1], line[1:]):
+                e += 0.033 * float(np.hypot(*(b - a)))
+                out.append(f"G1 X{b[0]:.3f} Y{b[1]:.3f} E{e:.5f}")
+    return "\n".join(out) + "\n"
+
+
+def _hatch(area, spacing: float) -> list:
+    lines = []
+    x0, y0, x1, y1 = area.bounds
+    for y in np.arange(y0 + spacing / 2, y1, spacing):
+        cut = area.intersection(LineString([(x0 - 1, y), (x1 + 1, y)]))
+        for piece in getattr(cut, "geoms", [cut]):
+            if not piece.is_empty:
+                lines.append(np.asarray(piece.coords))
+    return lines
+
+
+def _host_and_box(box_walls: bool, box_xy=(104.0, 104.0)) -> tuple:
+    """A 24 mm square (two walls) and an 8 mm box mesh at `box_xy` with two walls of its own (or
+    none: an infill mesh of FILL only); the host's FILL stops at the box, as Cura's does."""
+    lw = 0.4
+    host = box(98, 98, 122, 122)
+    inner = box(box_xy[0], box_xy[1], box_xy[0] + 8, box_xy[1] + 8)
+    host_area = host.buffer(-2 * lw, join_style=2)
+    blocks = [("host", "WALL-OUTER", [_square_ring(*host.buffer(-lw / 2, join_style=2).bounds)]),
+              ("host", "WALL-INNER", [_square_ring(*host.buffer(-1.5 * lw, join_style=2).bounds)]),
+              ("host", "FILL", _hatch(host_area.difference(inner), 2.0))]
+    if box_walls:
+        blocks += [("box", "WALL-OUTER", [_square_ring(*inner.buffer(-lw / 2, join_style=2).bounds)]),
+                   ("box", "WALL-INNER", [_square_ring(*inner.buffer(-1.5 * lw, join_style=2).bounds)]),
+                   ("box", "FILL", _hatch(inner.buffer(-2 * lw, join_style=2), 1.0))]
+    else:
+        blocks += [("box", "FILL", _hatch(inner.intersection(host_area), 1.0))]
+    parse = parse_layer(_layer_gcode(blocks), MachineState(), RetractionModel())
+    return parse, mesh_layer(parse, "host", lw, 0.0, 2.0), inner, host_area, lw
+
+
+@pytest.mark.parametrize("box_xy", [(104.0, 104.0), (94.0, 106.0)], ids=["inside", "across-the-edge"])
+def test_a_mesh_with_walls_inside_the_host_is_cut_out_of_its_area(box_xy):
+    """Cura's host walls do not go round an infill mesh with walls: its walls and inside are not
+    the host's infill area; the rest of it is, whole."""
+    parse, geo, inner, host_area, lw = _host_and_box(True, box_xy)
+    assert geo.area.intersection(inner.buffer(-lw)).area > 10.0, "the walls alone do not show the box"
+    cut = without_foreign(parse, geo, lw)
+    on_box_walls = inner.buffer(-0.01).difference(inner.buffer(-2 * lw + 0.01))  # the wall lines' width
+    # (the round buffer of the wall lines leaves the square's four outer corner tips, 0.003 mm2 each)
+    assert cut.area.intersection(on_box_walls).area < 0.02
+    if box_xy == (104.0, 104.0):  # nested: its inside is Cura's infill of the box
+        assert cut.area.intersection(inner).area < 0.02
+    rest = host_area.difference(inner.buffer(lw))
+    assert rest.difference(cut.area).area < 0.02 * rest.area
+
+
+def test_an_infill_mesh_without_walls_leaves_the_host_area_as_it_is():
+    parse, geo, inner, host_area, lw = _host_and_box(False)
+    assert without_foreign(parse, geo, lw) is geo

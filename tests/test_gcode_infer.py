@@ -65,3 +65,57 @@ def test_the_line_width_is_the_first_inner_wall_s_distance_however_many_walls(wa
 
     parse = parse_layer(_walls_layer(walls), MachineState(), RetractionModel())
     assert wall_line_width(parse, "part.stl") == pytest.approx(0.4, abs=0.01)
+
+
+def _skin_layer(width: float, side: float = 20.0, ironing: bool = False, turn: float = 0.4) -> str:
+    """One Cura layer of skin: a zigzag of lines `width` apart across a square, turned by `turn` rad,
+    with one outer wall only (no inner wall to measure from); optionally ironing lines 0.1 mm apart
+    at a tenth of the flow over it, as Cura types them too (SKIN)."""
+    lines, e = [";LAYER:2", "G0 F6000 X0 Y0 Z0.6", ";MESH:part.stl", ";TYPE:WALL-OUTER"], 0.0
+    for x, y in ((0, 0), (side, 0), (side, side), (0, side), (0, 0)):
+        e += 0.03 * side
+        lines.append(f"G1 F1500 X{x:.3f} Y{y:.3f} E{e:.5f}")
+    c, s = np.cos(turn), np.sin(turn)
+
+    def at(u, v):  # the square's centre, turned
+        return side / 2 + c * u - s * v, side / 2 + s * u + c * v
+
+    def zigzag(gap, rate):
+        nonlocal e
+        out, prev = [], None
+        for k, v in enumerate(np.arange(-side / 3, side / 3, gap)):
+            ends = (-side / 3, side / 3) if k % 2 == 0 else (side / 3, -side / 3)
+            for u in ends:
+                x, y = at(u, v)
+                if prev is not None:
+                    e += rate * float(np.hypot(x - prev[0], y - prev[1]))
+                out.append(f"G1 X{x:.3f} Y{y:.3f} E{e:.5f}")
+                prev = (x, y)
+        return out
+
+    lines += [";TYPE:SKIN", "G0 X{:.3f} Y{:.3f}".format(*at(-side / 3, -side / 3))] + zigzag(width, 0.05)
+    if ironing:
+        lines += ["G0 X{:.3f} Y{:.3f}".format(*at(-side / 3, -side / 3))] + zigzag(0.1, 0.005)
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("width", [0.4, 0.6, 0.8])
+@pytest.mark.parametrize("ironing", [False, True], ids=["skin", "ironed"])
+def test_with_one_wall_the_line_width_is_the_skin_lines_spacing(width, ironing):
+    """A 0.6 mm nozzle with Cura's 0.8 mm wall thickness prints one wall: no inner wall tells the line
+    width (the CLI took 0.4 mm and printed 20 % as 24 %, 1-2 mm of it on skin); the skin's lines lie one
+    line width apart, the ironing's at a tenth of the flow is left out."""
+    from DelaunayInfill.gcode.infer import skin_line_width, wall_line_width
+    from DelaunayInfill.gcode.read import MachineState, RetractionModel, parse_layer
+
+    parse = parse_layer(_skin_layer(width, ironing=ironing), MachineState(), RetractionModel())
+    assert wall_line_width(parse, "part.stl") is None
+    assert skin_line_width(parse) == pytest.approx(width, abs=0.005)
+
+
+def test_no_skin_lines_tell_no_line_width():
+    from DelaunayInfill.gcode.infer import skin_line_width
+    from DelaunayInfill.gcode.read import MachineState, RetractionModel, parse_layer
+
+    parse = parse_layer(_walls_layer(1), MachineState(), RetractionModel())
+    assert skin_line_width(parse) is None

@@ -21,8 +21,8 @@ from shapely.geometry import LineString, MultiLineString, Point, Polygon, box
 from DelaunayInfill.gcode import ProcessSettings, process_gcode
 from DelaunayInfill.gcode.area import skin_region, wall_rings
 from DelaunayInfill.gcode.footer import read_footer
-from DelaunayInfill.gcode.read import as_cura_list
 from DelaunayInfill.gcode.infer import _quantile
+from DelaunayInfill.gcode.read import as_cura_list
 from DelaunayInfill.gcode.witness import _all_near, _near, _polylines, kd_tree, kept_cura_pieces, witnessed
 
 LW = 0.4

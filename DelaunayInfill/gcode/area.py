@@ -8,7 +8,10 @@ The G-code carries no infill polygons.  Per mesh and layer:
 * infill area = (interior - walls) grown by the infill overlap, minus the
   skin: its lines and the space between them (`skin_region`);
 * a mesh without walls (an infill-only mesh) has a closed hull of its FILL
-  lines as its area.
+  lines as its area;
+* what other meshes print in the layer is not infill area of this one
+  (`without_foreign`): their walls and skin, and the whole part of a mesh
+  with walls inside this one (an infill mesh, which Cura cuts out of it).
 
 Nothing here trusts Cura's FILL lines to widen an area: where they fall
 outside it, `witness.py` keeps Cura's own lines there.
@@ -36,6 +39,7 @@ from .read import FILL, SKIN, WALL_INNER, WALL_OUTER, LayerParse
 __all__ = [
     "MeshLayer",
     "mesh_layer",
+    "without_foreign",
     "runs_of",
     "fill_hull",
     "fraction_inside",
@@ -179,6 +183,20 @@ def _buffer_runs(runs: list[np.ndarray], radius: float):
     if not lines:
         return empty_area()
     return to_multipolygon(multilinestring_of(lines).buffer(radius, 4))
+
+
+def _opened(area, line_width: float):
+    """`area` without the strips narrower than 0.9 line widths that walls and skin leave between them.
+
+    Cura's skin lines run up to the inner wall; the space between the wall's and the skin's
+    buffers is a sliver that no infill line of Cura's goes in (a line along it would lie on both).
+    A mitred opening keeps the area's corners.
+    """
+    r = 0.45 * line_width
+    shrunk = area.buffer(-r, join_style=2, mitre_limit=4.0)
+    if shrunk.is_empty:
+        return empty_area()
+    return to_multipolygon(shrunk.buffer(r, join_style=2, mitre_limit=4.0).intersection(area))
 
 
 def skin_region(runs: list[np.ndarray], line_width: float):
@@ -426,7 +444,7 @@ def mesh_layer(
             inner = part.difference(walls)
             area = to_multipolygon(inner.buffer(overlap, 4)) if overlap > 0 else to_multipolygon(inner)
     if skin_mask.any() and not area.is_empty:
-        area = to_multipolygon(area.difference(skin_region(runs_of(parse, skin_mask), line_width)))
+        area = _opened(area.difference(skin_region(runs_of(parse, skin_mask), line_width)), line_width)
     pieces = polygons_of(area)
     kept = [p for p in pieces if p.area > line_width * line_width]
     if len(kept) < len(pieces):  # (slivers left between walls and skin go; else the area stays as it is)
@@ -440,3 +458,87 @@ def mesh_layer(
     if cache is not None and key is not None:
         cache.put(key, (part, area, used_hull))
     return MeshLayer(mesh, fill, fill_block, fill_de, part, area, has_walls, used_hull)
+
+
+def _foreign_key(segments: np.ndarray, kinds: np.ndarray, meshes: np.ndarray, line_width: float, area) -> bytes:
+    h = hashlib.blake2b(digest_size=16)
+    for a in (np.round(segments, 3), kinds, meshes, np.array([line_width])):
+        h.update(np.ascontiguousarray(a).tobytes() + b"|")
+    coords = [np.round(np.asarray(r.coords), 3).tobytes() for p in polygons_of(area) for r in (p.exterior, *p.interiors)]
+    h.update(b"|".join(coords))
+    return h.digest()
+
+
+def without_foreign(parse: LayerParse, geo: MeshLayer, line_width: float, cache: AreaCache | None = None) -> MeshLayer:
+    """`geo` with what the layer's other meshes print cut out of its area.
+
+    Cura gives each mesh its own walls and skin, and an infill mesh with walls
+    (or a mesh nested in another with carving off) is cut out of the infill of
+    the mesh around it: the host's walls do not go round it.  So the area
+    rebuilt from the host's own walls holds the other mesh's walls, its skin
+    (an infill mesh's bottom and top layers are skin) and its infill.  Cut out:
+    the other meshes' wall lines grown by half a line width, their skin
+    (`skin_region`), and the part inside the outer walls of each other mesh
+    whose part lies (nine tenths or more) inside this mesh's part.
+
+    Parameters
+    ----------
+    parse : LayerParse
+    geo : MeshLayer
+        The mesh's geometry in this layer (`mesh_layer`).
+    line_width : float
+        mm.
+    cache : AreaCache, optional
+
+    Returns
+    -------
+    MeshLayer
+        `geo` itself when no other mesh prints walls or skin near its area,
+        else a copy with the smaller area (the same area object for a layer
+        that repeats the last one, from `cache`).
+    """
+    area = geo.area
+    if area.is_empty:
+        return geo
+    m = parse.moves
+    kinds = m["kind"]
+    others = parse.extruding() & ~parse.mesh_mask(geo.mesh)
+    others &= (kinds == WALL_OUTER) | (kinds == WALL_INNER) | (kinds == SKIN)
+    if not others.any():
+        return geo
+    # only moves that reach the area's bounding box (grown by a line width) can touch it
+    x_lo, y_lo, x_hi, y_hi = area.bounds
+    reach = line_width
+    x_lo, y_lo, x_hi, y_hi = x_lo - reach, y_lo - reach, x_hi + reach, y_hi + reach
+    near = ((np.maximum(m["x0"], m["x1"]) >= x_lo) & (np.minimum(m["x0"], m["x1"]) <= x_hi)
+            & (np.maximum(m["y0"], m["y1"]) >= y_lo) & (np.minimum(m["y0"], m["y1"]) <= y_hi))
+    others &= near
+    if not others.any():
+        return geo
+    key = None
+    if cache is not None:
+        key = b"foreign" + _foreign_key(parse.xy_segments()[others], kinds[others], m["mesh"][others], line_width, area)
+        hit = cache.get(key)
+        if hit is not None:
+            return MeshLayer(geo.mesh, geo.fill, geo.fill_block, geo.fill_de, geo.part, hit[0], geo.has_walls, geo.used_hull)
+    walls = others & ((kinds == WALL_OUTER) | (kinds == WALL_INNER))
+    pieces = [_buffer_runs(runs_of(parse, walls), line_width / 2 + _EPS)]
+    skin = others & (kinds == SKIN)
+    if skin.any():
+        pieces.append(skin_region(runs_of(parse, skin), line_width))
+    host = geo.part if geo.part is not None else area
+    host_grown = host.buffer(line_width, 4)
+    outer = others & (kinds == WALL_OUTER)
+    for index in np.unique(m["mesh"][outer]).tolist():
+        rings = wall_rings(runs_of(parse, outer & (m["mesh"] == index)), 2.0 * line_width)
+        nested = _even_odd(rings) if rings else empty_area()
+        if not nested.is_empty and nested.difference(host_grown).area <= 0.1 * nested.area:
+            pieces.append(to_multipolygon(nested.buffer(line_width / 2, 4)))
+    pieces = [p for p in pieces if not p.is_empty]
+    smaller = _opened(area.difference(unary_union(pieces)), line_width) if pieces else area
+    kept = [p for p in polygons_of(smaller) if p.area > line_width * line_width]
+    if len(kept) < len(polygons_of(smaller)):  # (slivers between the other mesh's walls and ours go)
+        smaller = to_multipolygon(unary_union(kept))
+    if cache is not None and key is not None:
+        cache.put(key, (smaller,))
+    return MeshLayer(geo.mesh, geo.fill, geo.fill_block, geo.fill_de, geo.part, smaller, geo.has_walls, geo.used_hull)

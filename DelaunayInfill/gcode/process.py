@@ -39,12 +39,13 @@ from .area import (
     mesh_layer,
     sample_segments,
     segments_of,
+    without_foreign,
 )
 from .emit import EmitParams, emit_block
 from .estimate import move_seconds, move_times
 from .footer import read_footer
 from .header import patch_header
-from .infer import e_per_mm, family_spacings, infill_density, wall_line_width
+from .infer import e_per_mm, family_spacings, infill_density, skin_line_width, wall_line_width
 from .read import (
     FILL,
     WALL_INNER,
@@ -402,13 +403,27 @@ _WIDE_AREA_SPACINGS = 4.0
 _PAIRED_LINE_PATTERNS = frozenset({"tetrahedral", "quarter_cubic", "cross", "cross_3d"})
 
 
+#: a part with too few lines for families takes the footer's density while its lines' length over its
+#: area, summed over the layers, lies within this factor of it (Cura's clipped lines read 0.8-1.25 x)
+_FEW_LINES_AGREE = 0.7
+
+
 @dataclass
 class _RegionTally:
     target: float
     length: float = 0.0
     area: float = 0.0  # summed over the layers, mm2
+    target_area: float = 0.0  # target x area, summed: where the target changes, the report's is their mean
+    mixed: bool = False  # a layer had another target
     layers: int = 0  # layers in which the region holds infill area
     last_chunk: int = -1
+
+
+def _tally_added(before: tuple | None, target: float, length: float, area: float, target_area: float) -> tuple:
+    """What a layer added to one region's tally: (target, length, area), its target the layer's mean."""
+    if before is not None:
+        length, area, target_area = length - before[1], area - before[2], target_area - before[3]
+    return (target_area / area if area > 1e-9 else target), length, area
 
 
 @dataclass
@@ -422,6 +437,9 @@ class _MeshFacts:
     cura_density: float | None = None  # Cura's own, from its FILL spacing
     extruder: int | None = None  # the extruder of its first block
     fill_wall_ratio: float | None = None  # smallest E per mm of its FILL over its walls' so far (one layer's infill)
+    few_lines_mm: float = 0.0  # its FILL length in the layers with too few lines for families, summed ...
+    few_lines_area: float = 0.0  # ... and its infill area there, mm2 (a part without modifiers)
+    few_lines_chunk: int = -1  # the chunk they were last added for
     sections: tuple = ()  # combined infill: its last layers' rebuilt infill areas, newest last
 
     def learned(self) -> tuple:
@@ -559,6 +577,7 @@ class _Run:
         self.layer_sections: dict[str, object] = {}  # this layer's infill area of each mesh (combined infill only)
         self.lw_warned = False
         self.any_lw: float | None = None
+        self.skin_lw: float | None = None  # the skin lines' spacing, while no walls have told the line width
         self.measured_lw: float | None = None
 
     def _footer_count(self, key: str) -> int:
@@ -676,6 +695,9 @@ class _Run:
                     break
         if self.any_lw is not None:
             return self.any_lw
+        if self.skin_lw is not None:
+            self.measured_lw = self.measured_lw or self.skin_lw
+            return self.skin_lw
         if not self.lw_warned:
             self.report.warnings.append(f"line width not found from walls; using {_DEFAULT_LINE_WIDTH} mm (give --line-width)")
             self.lw_warned = True
@@ -703,6 +725,8 @@ class _Run:
             t = self.tally[name] = _RegionTally(target)
         t.length += length
         t.area += area
+        t.target_area += target * area
+        t.mixed |= target != t.target
         if area > 0 and t.last_chunk != self.chunks_seen:
             t.layers += 1
             t.last_chunk = self.chunks_seen
@@ -757,6 +781,13 @@ class _Run:
                     self.report.warnings.append(
                         f"layer {parse.number} prints infill {found} layers high (Cura's Infill Layer Thickness): "
                         "only layers whose group of layers has one section are replaced")
+            if self.skin_lw is None and self.first_lw is None and self.any_lw is None and not self.s.line_width \
+                    and parse.number >= 1 and not self.keep_cura \
+                    and not any(_has_both_walls(parse, mesh) for mesh in parse.meshes):
+                # no walls to tell the line width: the skin's lines (the skin layers under the infill
+                # come before any layer asks for it)
+                with self.clock("areas"):
+                    self.skin_lw = skin_line_width(parse)
             todo = [b for b in parse.blocks if b.has_moves and self.s.enabled(b.mesh)] if not self.keep_cura else []
             if not todo:
                 self.report.layers_kept += 1
@@ -815,6 +846,7 @@ class _Run:
             combined,
             tuple(vars(self.retraction).values()),
             self.any_lw,
+            self.skin_lw,
             tuple((name, facts.learned()) for name, facts in self.meshes.items() if facts.learned() != _NOTHING_LEARNED),
         )
 
@@ -822,7 +854,7 @@ class _Run:
         """The report's running totals (what a layer adds to them is what its repeats add again)."""
         r = self.report
         return (tuple(getattr(r, name) for name in _COUNTED), dict(self.e_before), dict(self.e_delta),
-                {name: (t.target, t.length, t.area) for name, t in self.tally.items()}, self.time_delta)
+                {name: (t.target, t.length, t.area, t.target_area) for name, t in self.tally.items()}, self.time_delta)
 
     def _region_sections(self, z: float) -> list:
         z_slice = self._slice_z(z)
@@ -840,8 +872,8 @@ class _Run:
             tuple(b - a for a, b in zip(counted0, counted1, strict=True)),
             {k: v - e_before0.get(k, 0.0) for k, v in e_before1.items()},
             {k: v - e_delta0.get(k, 0.0) for k, v in e_delta1.items()},
-            {k: (t, length - tally0.get(k, (t, 0.0, 0.0))[1], area - tally0.get(k, (t, 0.0, 0.0))[2])
-             for k, (t, length, area) in tally1.items()},
+            {k: _tally_added(tally0.get(k), t, length, area, target_area)
+             for k, (t, length, area, target_area) in tally1.items()},
             time1 - time0,
         )
         record.extra["regions"] = sections
@@ -899,10 +931,12 @@ class _Run:
             return ms.density
         if self.s.density is not None:
             return self.s.density
-        footer = self._footer_density(mesh, fill, lw)
+        footer = self._footer_density(mesh, fill, lw, area.area if area is not None and alone else None)
         if footer is not None:
             return footer
         facts = self._facts(mesh)
+        if len(fill) < 12 and facts.few_lines_chunk == self.chunks_seen and facts.density is None:
+            return facts.few_lines_mm * lw / facts.few_lines_area  # what its lines said so far, not one layer's few
         d = facts.density
         if d is None:
             d = self._infill_density(fill, lw, area.area if area is not None else None, by_length=alone)
@@ -921,12 +955,16 @@ class _Run:
                 d = facts.density = here
         return d
 
-    def _footer_density(self, mesh: str, fill: np.ndarray, lw: float) -> float | None:
+    def _footer_density(self, mesh: str, fill: np.ndarray, lw: float, area: float | None = None) -> float | None:
         """Cura's ``infill_sparse_density`` from the file's settings footer, for a mesh whose lines agree.
 
         The footer holds the print's settings, not per-model ones: a mesh whose
         lines form clear families at another density (more than a quarter off)
-        has a per-model density of its own, which its lines tell.
+        has a per-model density of its own, which its lines tell; so does a
+        part with too few lines for families whose lines' length over its
+        `area` (mm², a mesh without modifiers), summed over such layers so
+        far, is off the footer's by more than a factor 1.4 (a 10 % cutting
+        mesh in a 20 % print: Cura's lines there read 12 %).
         """
         wanted = self.footer.infill_density(self._facts(mesh).extruder or 0)
         if wanted is None or wanted <= 0.0:
@@ -937,6 +975,17 @@ class _Run:
         spacings = family_spacings(fill, lw) if len(fill) >= 12 else None
         if spacings is not None and abs(sum(lw / sp for sp in spacings) - wanted) > 0.25 * wanted:
             return None
+        # (only over two line spacings square or more: a small island's few clipped lines say little)
+        # (gradual infill's sparser steps are replaced at the full density: not a density of its own)
+        if spacings is None and len(fill) and area and area >= (4.0 * lw / wanted) ** 2 and not self.gradual_steps:
+            facts = self._facts(mesh)
+            if facts.few_lines_chunk != self.chunks_seen:
+                facts.few_lines_chunk = self.chunks_seen
+                facts.few_lines_mm += float(np.hypot(*(fill[:, 1] - fill[:, 0]).T).sum())
+                facts.few_lines_area += area
+            by_length = facts.few_lines_mm * lw / facts.few_lines_area
+            if not _FEW_LINES_AGREE * wanted <= by_length <= wanted / _FEW_LINES_AGREE:
+                return None
         return wanted
 
     def _region_mesh_density(self, mesh: str, fill: np.ndarray, lw: float, area) -> float:
@@ -1070,6 +1119,8 @@ class _Run:
         Cura's lines, its density regions, the pattern's paths, and Cura's lines where those do not take over."""
         lw = st.line_width
         clock = self.clock
+        with clock("areas"):  # other meshes' walls and skin, and an infill mesh with walls inside this one
+            st.geo = without_foreign(parse, st.geo, lw, self.area_cache)
         if not st.geo.used_hull:  # (a hull is made of the lines: witnessed already)
             with clock("areas"):
                 st.geo = self._witnessed(parse, st.geo, [c.geo for c in children], lw)
@@ -1109,7 +1160,8 @@ class _Run:
                 result = self._clip(pattern, area, start)
                 paths = self._paths(result, min_length=lw)  # (a stub under a line width prints a blob)
             with clock("density report"):
-                self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only)
+                self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only,
+                              base_name=self._base_name(st.name, density))
         reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
         with clock("Cura's lines kept"):
             paths = self._with_cura_kept(st, children, area, paths, reach, empty, start, out, infill_walls, in_walls)
@@ -1520,7 +1572,8 @@ class _Run:
         memo[key] = (zones, lengths)
         return lengths
 
-    def _measure(self, result, paths, area, base_density, regions, lw, disjoint: bool = False) -> None:
+    def _measure(self, result, paths, area, base_density, regions, lw, disjoint: bool = False,
+                 base_name: str = "base") -> None:
         """Accumulate new infill length x line width and area per density region (later regions win)."""
         if not paths:
             return
@@ -1528,7 +1581,18 @@ class _Run:
         lengths = self._zone_lengths(result, paths, zones, lw)
         for k, (_, dens, name) in enumerate(regions):
             self._tally(name, dens, float(lengths[k]) * lw, areas[k])
-        self._tally("base", base_density, float(lengths[-1]) * lw, areas[-1])
+        self._tally(base_name, base_density, float(lengths[-1]) * lw, areas[-1])
+
+    def _base_name(self, mesh: str, density: float) -> str:
+        """The report's name of a mesh's own `density`: "base", or "mesh NAME" when the mesh has a density
+        of its own (a per-model setting, or lines that disagree with the footer's density)."""
+        ms = self.s.mesh(mesh)
+        if ms is not None and ms.density is not None:
+            return f"mesh {mesh}"
+        footer = self.footer.infill_density(self._facts(mesh).extruder or 0)
+        if self.s.density is None and footer is not None and density != footer and not self.gradual_steps:
+            return f"mesh {mesh}"
+        return "base"
 
     # ------------------------------------------------------------------ header
     def finish(self, header: str) -> str:
@@ -1552,7 +1616,8 @@ class _Run:
             if t is None or (name == "base" and t.area <= 1e-6 and len(self.tally) > 1):
                 continue  # regions tile the whole part: no base zone to report
             measured = t.length / t.area if t.area > 1e-9 else float("nan")
-            r.regions.append(RegionReport(name, t.target, measured, t.area, t.layers))
+            target = t.target_area / t.area if t.mixed and t.area > 1e-9 else t.target
+            r.regions.append(RegionReport(name, target, measured, t.area, t.layers))
         return patch_header(header, self.time_delta, self.e_before, self.e_delta, self.s, volumetric=self.info.volumetric,
                             layers=(r.layers_processed, r.layers_kept, len(r.failed_layers)))
 

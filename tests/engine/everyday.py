@@ -294,6 +294,11 @@ def post() -> Manifold:
     return block(12, 12, 20)
 
 
+def modifier_box() -> Manifold:
+    """A 16 x 16 x 30 box: a modifier (infill mesh, cutting mesh) over a model, taller than it."""
+    return block(16, 16, 30)
+
+
 MODELS: dict[str, Callable[[], Manifold]] = {
     "hidden_cavity": hidden_cavity,
     "through_hole": through_hole,
@@ -317,6 +322,7 @@ MODELS: dict[str, Callable[[], Manifold]] = {
     "lobed_vase": lobed_vase,
     "low_disc": low_disc,
     "post": post,
+    "modifier_box": modifier_box,
 }
 
 _BUILT: dict[str, Manifold] = {}
@@ -398,12 +404,16 @@ class EverydayCase:
         Cura settings over ``curaengine.DEFAULT_SETTINGS`` (``infill_sparse_density`` is set per density).
     exercises : str
         What the case is there for.
+    mesh_settings : tuple of dict
+        Per-mesh Cura settings, one per model (none: every model has none), e.g. ``{"extruder_nr": 1}``
+        with ``machine_extruder_count`` 2 in `settings`.
     """
 
     name: str
     models: tuple
     settings: dict = field(default_factory=dict, hash=False)
     exercises: str = ""
+    mesh_settings: tuple = field(default=(), hash=False)
 
     def mesh_names(self) -> list[str]:
         """STL file names, as ``;MESH:`` shows them (``<model>.stl``, numbered when repeated)."""
@@ -415,8 +425,10 @@ class EverydayCase:
 
     def key(self, density: float, version: str) -> str:
         """Cache key: case, density and engine version."""
-        blob = json.dumps([self.name, [list(m) for m in self.models], self.settings, density, version],
-                          sort_keys=True, default=str)
+        what = [self.name, [list(m) for m in self.models], self.settings, density, version]
+        if self.mesh_settings:
+            what.append(list(self.mesh_settings))
+        blob = json.dumps(what, sort_keys=True, default=str)
         return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -484,9 +496,20 @@ def placed_model(name: str, offset: tuple[float, float]) -> Manifold:
     return build(name).translate((offset[0], offset[1], 0.0))
 
 
+#: per-mesh settings that make a mesh a modifier: no material of its own outside the models
+MODIFIER_KEYS = ("infill_mesh", "cutting_mesh", "anti_overhang_mesh", "support_mesh")
+
+
+def is_modifier(mesh_values: Mapping) -> bool:
+    """Whether a mesh with these per-mesh settings is a modifier of other meshes."""
+    return any(mesh_values.get(key) for key in MODIFIER_KEYS)
+
+
 def case_solid(case: EverydayCase) -> Manifold:
-    """All the models of `case` in place, in model coordinates."""
-    return Manifold.compose([placed_model(name, offset) for name, offset in case.models])
+    """All the models of `case` in place (modifiers left out), in model coordinates."""
+    values = case.mesh_settings or [{}] * len(case.models)
+    return Manifold.compose([placed_model(name, offset) for (name, offset), v in zip(case.models, values)
+                             if not is_modifier(v)])
 
 
 # --------------------------------------------------------------------------- slicing
@@ -586,17 +609,18 @@ def cura_footer(settings: Mapping) -> str:
     """The ``;SETTING_3`` footer Cura's G-code writer appends: the changed settings as JSON, 80 columns.
 
     Cura writes a JSON object of serialized settings containers (``global_quality``, one
-    ``extruder_quality`` per extruder; here every changed setting goes into the extruder's, where
+    ``extruder_quality`` per extruder; here every changed setting goes into each extruder's, where
     Cura keeps per-extruder settings), escapes backslashes and newlines for a comment, and cuts the
     text into lines of ``;SETTING_3 `` + 69 characters.
     """
     values = "".join(f"{key} = {str(value).lower() if isinstance(value, bool) else value}\n"
                      for key, value in sorted(settings.items()))
-    extruder = ("[general]\nversion = 4\nname = Everyday\ndefinition = fdmprinter\n\n[metadata]\n"
-                "type = quality_changes\nquality_type = normal\nposition = 0\n\n[values]\n" + values)
+    extruders = [("[general]\nversion = 4\nname = Everyday\ndefinition = fdmprinter\n\n[metadata]\n"
+                  f"type = quality_changes\nquality_type = normal\nposition = {number}\n\n[values]\n" + values)
+                 for number in range(max(1, int(settings.get("machine_extruder_count", 1))))]
     glob = ("[general]\nversion = 4\nname = Everyday\ndefinition = fdmprinter\n\n[metadata]\n"
             "type = quality_changes\nquality_type = normal\n\n[values]\n")
-    text = json.dumps({"global_quality": glob, "extruder_quality": [extruder]})
+    text = json.dumps({"global_quality": glob, "extruder_quality": extruders})
     escaped = text.replace("\\", "\\\\").replace("\n", "\\n").replace("\r", "\\r")
     return "".join(f";SETTING_3 {escaped[i:i + 69]}\n" for i in range(0, len(escaped), 69))
 
@@ -620,20 +644,24 @@ def slice_everyday(case: EverydayCase, density: float, version: str,
         path = os.path.join(target, mesh_name)
         write_model_stl(path, placed_model(model, offset), mesh_name)
         stl[mesh_name] = path
-    meshes = [(name, {}) for name in stl]
+    meshes = [(name, dict(values)) for name, values in zip(stl, case.mesh_settings or [{}] * len(stl))]
     settings = {**case.settings, "infill_sparse_density": density}
     resolved = curaengine.resolve_settings(settings, meshes, resources=chosen.resources)
     line_width = float({**resolved.global_values, **resolved.extruder_values}["infill_line_width"])
     reference = reference_settings(settings, line_width)
+    # an infill or cutting mesh's infill is dense lines in the reference too
+    reference_meshes = [(name, reference_settings(values, line_width)
+                         if values.get("infill_mesh") or values.get("cutting_mesh") else values)
+                        for name, values in meshes]
 
-    def run(user: dict, out_name: str):
-        return curaengine.slice_models(meshes, user, os.path.join(target, out_name), engine=chosen.executable,
-                                       resources=chosen.resources, cwd=target)
+    def run(user: dict, out_name: str, with_meshes: list):
+        return curaengine.slice_models(with_meshes, user, os.path.join(target, out_name),
+                                       engine=chosen.executable, resources=chosen.resources, cwd=target)
 
     start = time.perf_counter()
     with ThreadPoolExecutor(max_workers=2) as pool:
-        sparse_job = pool.submit(run, settings, "cura.gcode")
-        reference_job = pool.submit(run, reference, "reference.gcode")
+        sparse_job = pool.submit(run, settings, "cura.gcode", meshes)
+        reference_job = pool.submit(run, reference, "reference.gcode", reference_meshes)
         sparse, dense = sparse_job.result(), reference_job.result()
     seconds = time.perf_counter() - start
     # Saved as Cura's GUI saves G-code: with the print's changed settings in a ;SETTING_3 footer

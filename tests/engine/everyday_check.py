@@ -60,12 +60,21 @@ MAX_MATERIAL_MM_LAYER = 2.0
 #: check 4, coverage: file-wide share of the points along Cura's FILL with new FILL within `spacing`
 MIN_COVERAGE = 0.99
 
+#: check 6, walls: new FILL within this many line widths of a wall line's centre is on the wall (Cura's
+#: lines end half a line width minus the infill overlap from the inner wall's centre) ...
+ON_WALL_RADIUS_WIDTHS = 0.25
+#: ... and a layer may have this much more of it (mm) than Cura's FILL had, scaled to the new length
+MAX_ON_WALL_MM_LAYER = 1.0
+
 #: check 5, islands: an island counts when Cura's FILL in it is at least this many line widths long,
-#: and it is lost unless the new FILL within it (grown by a line width) is at least as long
+#: and it is lost unless the new FILL within it (grown by a line width) is at least as long; Cura's
+#: stubs, runs of FILL shorter than this, do not count (they print as blobs: the pass leaves them out)
 ISLAND_MIN_LINE_WIDTHS = 1.0
 
 #: the feature types of the original file that are skin
 SKIN_TYPES = frozenset({"SKIN"})
+#: ... and that are walls
+WALL_TYPES = frozenset({"WALL-OUTER", "WALL-INNER"})
 
 #: sampling step along segments for the length measurements, mm
 SAMPLE_STEP_MM = 0.2
@@ -93,6 +102,8 @@ class LayerRow:
     outside_mm: float  # of it, outside the reference area grown by line_width / 2
     material_mm: float  # of it, outside the true section grown by line_width / 2
     on_skin_mm: float  # of it, on Cura's skin that is not infill area
+    on_wall_mm: float  # of it, on a wall line of any mesh (check 6)
+    original_on_wall_mm: float  # Cura's FILL on a wall line
     original_mm: float  # Cura's FILL extrusion length
     coverage_samples: int  # points along Cura's FILL, one per line width
     coverage_hits: int  # of them, with new FILL within `spacing`
@@ -166,14 +177,16 @@ class LayerMoves:
     ----------
     z : float
         Z of the layer's first extruding move, mm (nan when it has none).
-    fill, skin : np.ndarray
-        (k, 2, 2) XY segments of the extruding ``;TYPE:FILL`` and ``;TYPE:SKIN`` moves, mm,
-        in file order: ``segments[i, 0]`` is where move i starts, ``segments[i, 1]`` where it ends.
+    fill, skin, walls : np.ndarray
+        (k, 2, 2) XY segments of the extruding ``;TYPE:FILL``, ``;TYPE:SKIN`` and wall
+        (``WALL-OUTER``, ``WALL-INNER``) moves, mm, in file order: ``segments[i, 0]`` is
+        where move i starts, ``segments[i, 1]`` where it ends.
     """
 
     z: float
     fill: np.ndarray
     skin: np.ndarray
+    walls: np.ndarray = field(default_factory=lambda: _EMPTY_SEGMENTS)
 
 
 _EMPTY_SEGMENTS = np.zeros((0, 2, 2))
@@ -193,7 +206,7 @@ _STRUCTURE = re.compile(rb"\n;(TYPE|LAYER|MESH|TIME_ELAPSED):([^\n]*)")
 _EPSILON = 1e-9
 
 # feature contexts of the lines (the codes of _context_of)
-_OTHER, _FILL, _SKIN = 0, 1, 2
+_OTHER, _FILL, _SKIN, _WALL = 0, 1, 2, 3
 
 
 @dataclass
@@ -353,7 +366,8 @@ def _structure(data: bytes, newlines: np.ndarray, tool_lines: np.ndarray) -> _St
         if tag == b"MESH" and value != "NONMESH":
             continue
         if tag == b"TYPE":
-            context = _FILL if value == "FILL" else _SKIN if value in SKIN_TYPES else _OTHER
+            context = (_FILL if value == "FILL" else _SKIN if value in SKIN_TYPES
+                       else _WALL if value in WALL_TYPES else _OTHER)
         else:
             context = _OTHER
         mark_offsets.append(match.start())
@@ -376,7 +390,7 @@ def _structure(data: bytes, newlines: np.ndarray, tool_lines: np.ndarray) -> _St
 
 
 def _context_of(structure: _Structure, lines: np.ndarray) -> np.ndarray:
-    """(k,) int8: the feature context (_FILL, _SKIN, _OTHER) of each of the lines (k,) int."""
+    """(k,) int8: the feature context (_FILL, _SKIN, _WALL, _OTHER) of each of the lines (k,) int."""
     mark = np.searchsorted(structure.mark_lines, lines, side="right") - 1
     if len(structure.mark_lines) == 0:
         return np.full(len(lines), _OTHER, dtype=np.int8)
@@ -517,6 +531,7 @@ def _per_layer(numbers: list, bounds: np.ndarray, segments: np.ndarray, z: np.nd
             z=float(z[here][0]) if bounds[seq + 1] > bounds[seq] else math.nan,
             fill=segments[here][kinds == _FILL],
             skin=segments[here][kinds == _SKIN],
+            walls=segments[here][kinds == _WALL],
         )
     return out
 
@@ -662,6 +677,18 @@ def _same_segments(segments: np.ndarray, cura: np.ndarray) -> np.ndarray:
     return np.isin(_segment_keys(segments), _segment_keys(cura))
 
 
+def _without_stubs(segments: np.ndarray, min_length: float) -> np.ndarray:
+    """`segments` (k, 2, 2) less its runs (segments each starting where the one before ends) shorter
+    than `min_length` (mm)."""
+    if not len(segments):
+        return segments
+    lengths = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
+    joined = np.zeros(len(segments), dtype=bool)
+    joined[1:] = np.all(np.abs(segments[1:, 0] - segments[:-1, 1]) < 1e-6, axis=1)
+    run = np.cumsum(~joined) - 1
+    return segments[np.bincount(run, weights=lengths)[run] >= min_length]
+
+
 def _check_layer(key: tuple[int, int], z: float, layer_height: float, original: LayerMoves | None,
                  new_fill: np.ndarray, reference_fill: np.ndarray, material: _GrownSections,
                  spacing: float, line_width: float) -> _LayerFindings:
@@ -694,6 +721,20 @@ def _check_layer(key: tuple[int, int], z: float, layer_height: float, original: 
         on_skin = _inside(skin_only, new_points[outside])
         on_skin_mm = float(new_weights[outside][on_skin].sum())
 
+    # 6 walls: new FILL on a wall line of any mesh (an infill mesh's walls lie inside the reference
+    # area of the mesh around it: containment cannot see infill printed across them)
+    on_wall_mm = original_on_wall_mm = 0.0
+    original_walls = original.walls if original is not None else _EMPTY_SEGMENTS
+    if len(original_walls) and len(new_points):
+        on_walls = lines_buffer(original_walls, ON_WALL_RADIUS_WIDTHS * line_width)
+        new_on_wall = _inside(on_walls, new_points)
+        if len(original_fill) and new_on_wall.any():
+            new_on_wall &= ~np.repeat(_same_segments(new_fill, original_fill), _samples_per_segment(new_fill, step))
+        on_wall_mm = float(new_weights[new_on_wall].sum())
+        if len(original_fill):
+            points, weights = sample_segments(original_fill, step)
+            original_on_wall_mm = float(weights[_inside(on_walls, points)].sum())
+
     # 2 material: the true section at mid-layer
     material_mm = 0.0
     if len(new_points):
@@ -711,7 +752,7 @@ def _check_layer(key: tuple[int, int], z: float, layer_height: float, original: 
 
     # 5 islands of the reference area where Cura printed FILL
     label = str(key[0]) if key[1] == 0 else f"{key[0]}#{key[1]}"
-    original_points, original_weights = sample_segments(original_fill, step)
+    original_points, original_weights = sample_segments(_without_stubs(original_fill, line_width), step)
     counted = 0
     lost: list[LostIsland] = []
     minimum = ISLAND_MIN_LINE_WIDTHS * line_width
@@ -734,7 +775,8 @@ def _check_layer(key: tuple[int, int], z: float, layer_height: float, original: 
                                        round(cura_mm, 2), round(island_new_mm, 2)))
 
     row = LayerRow(layer=key[0], occurrence=key[1], z=z, new_mm=new_mm, outside_mm=outside_mm,
-                   material_mm=material_mm, on_skin_mm=on_skin_mm, original_mm=float(original_weights.sum()),
+                   material_mm=material_mm, on_skin_mm=on_skin_mm, on_wall_mm=on_wall_mm,
+                   original_on_wall_mm=original_on_wall_mm, original_mm=float(original_weights.sum()),
                    coverage_samples=len(coverage_points), coverage_hits=hits, islands=counted,
                    lost_islands=len(lost))
     return _LayerFindings(row, lost)
@@ -765,6 +807,11 @@ def check_everyday(original: str, processed: str, reference: str, section_at: Ca
     5. islands: every connected part of the reference area holding at least one
        line width of Cura's FILL holds at least one line width of new FILL
        (within the island grown by ``line_width``).
+    6. walls: new FILL length within ``ON_WALL_RADIUS_WIDTHS * line_width`` of
+       the original layer's wall lines (of any mesh: an infill mesh's walls lie
+       inside the reference area of the mesh around it) at most 1.5 times
+       Cura's own FILL there (scaled to the new length) plus
+       :data:`MAX_ON_WALL_MM_LAYER` mm per layer.
 
     Parameters
     ----------
@@ -849,6 +896,16 @@ def _judge(result: EverydayResult, reference_layers: dict[tuple[int, int], Layer
     figures["on_skin_mm"] = round(on_skin_mm, 2)
     figures["worst_on_skin_layer"] = (worst_skin.label, round(worst_skin.on_skin_mm, 2)) if worst_skin else None
 
+    # 6 walls
+    on_wall_mm = sum(r.on_wall_mm for r in rows)
+    figures["on_wall_mm"] = round(on_wall_mm, 2)
+    figures["original_on_wall_mm"] = round(sum(r.original_on_wall_mm for r in rows), 2)
+    for r in rows:
+        allowed = _on_wall_allowance(r)
+        if r.on_wall_mm > allowed:
+            result.add_problem(f"walls: layer {r.label} (z {r.z:.2f}): {r.on_wall_mm:.1f} mm of new infill on walls "
+                               f"(Cura's infill had {r.original_on_wall_mm:.1f} mm there; limit {allowed:.1f} mm)")
+
     # 2 material
     material_mm = sum(r.material_mm for r in rows)
     material_fraction = material_mm / new_mm if new_mm else 0.0
@@ -888,11 +945,17 @@ def _judge(result: EverydayResult, reference_layers: dict[tuple[int, int], Layer
 # --------------------------------------------------------------------------- the table
 
 
+def _on_wall_allowance(row: LayerRow) -> float:
+    """How much new FILL a layer may print on walls (mm): Cura's own share, and MAX_ON_WALL_MM_LAYER."""
+    scale = row.new_mm / row.original_mm if row.original_mm > 0 else 1.0
+    return 1.5 * row.original_on_wall_mm * max(scale, 1.0) + MAX_ON_WALL_MM_LAYER
+
+
 def _badness(row: LayerRow) -> float:
     """How far a layer is from its limits (1.0 = at a limit), for ranking the worst layers."""
     coverage_gap = (1 - row.coverage) / (1 - MIN_COVERAGE) if row.coverage_samples else 0.0
     return max(row.outside_fraction / MAX_OUTSIDE_FRACTION_LAYER, row.material_mm / MAX_MATERIAL_MM_LAYER,
-               coverage_gap, 10.0 * row.lost_islands)
+               coverage_gap, 10.0 * row.lost_islands, row.on_wall_mm / _on_wall_allowance(row))
 
 
 def layer_table(result: EverydayResult, count: int = 12) -> str:

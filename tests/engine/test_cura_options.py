@@ -13,6 +13,16 @@
 * **Infill patterns whose lines pair up** (octet, quarter cubic, cross, cross 3D): one layer's lines
   come in pairs whose gap changes from layer to layer, so their spacing does not tell the density.
   With the footer the pass prints its density; without it, what the lines' length says.
+* **A 0.6 mm nozzle** (line width 0.6 mm, 0.3 mm layers, Cura's 0.8 mm wall thickness: one wall): no
+  inner wall tells the line width; the skin's lines do (the CLI took 0.4 mm: 20 % printed as 24 %,
+  filament +11-15 %, up to 1.9 mm of infill on skin).
+* **Two extruders**: two models each on its own extruder with a prime tower (both engines), and one
+  model's infill on the second extruder (CuraEngine 4.13: the 5.0 command line crashes on
+  ``infill_extruder_nr``, exit -11).  Each extruder's infill is replaced at its own E per mm, every
+  other move of each extruder is Cura's.
+* **Infill meshes and cutting meshes** (a box over the dome; with no walls, one wall or two): the dome's
+  new infill stays off the box's walls and skin and out of a box with walls; the box prints its own
+  density (reported as its own region), the dome the print's.
 
     python3 -m pytest tests/engine/test_cura_options.py -q -c tests/pytest.ini
 """
@@ -29,6 +39,7 @@ from DelaunayInfill.gcode.read import as_cura_list
 from .engines import ENGINES
 from .everyday import EverydayCase, EverydaySliceCache
 from .everyday_check import check_everyday, extract_layers
+from .gcode_check import check_unchanged, parse_gcode
 
 DENSITY = 20.0
 PAIRED_PATTERNS = ("tetrahedral", "quarter_cubic", "cross", "cross_3d")
@@ -213,3 +224,121 @@ def test_paired_line_patterns_print_their_density(option_slices, case, footer, v
     else:
         assert 0.15 <= base.measured <= 0.22, (base.measured, case.exercises)
         assert abs(report.filament_after_mm / report.filament_before_mm - 1.0) < 0.06, case.exercises
+
+
+NOZZLE_CASE = _case("dome", {"machine_nozzle_size": 0.6, "line_width": 0.6, "layer_height": 0.3,
+                             "layer_height_0": 0.3}, "0.6 mm nozzle, one wall")
+
+
+@pytest.mark.parametrize("version", ENGINES)
+@pytest.mark.parametrize("footer", [True, False], ids=["footer", "no-footer"])
+def test_one_wall_of_a_wide_nozzle_gives_the_line_width_by_the_skin(option_slices, footer, version):
+    sliced = _slice(option_slices, NOZZLE_CASE, version)
+    original, _, report, result = _process(sliced, footer=footer)
+    assert result.ok, result.report()
+    assert extract_layers(original), "no layers read"
+    assert report.line_width_found == pytest.approx(0.6, abs=0.01), report.warnings
+    assert not any("line width not found" in w for w in report.warnings), report.warnings
+    assert report.layers_processed >= 10
+    assert abs(report.regions[0].measured - DENSITY / 100) < 0.015, report.format_table()
+    assert abs(report.filament_after_mm / report.filament_before_mm - 1.0) < 0.03, report.format_table()
+
+
+def _extrusion_by_tool(text: str) -> dict:
+    """Net E per (extruder, feature type) of a G-code text, read line by line (absolute E, G92, T<n>)."""
+    import re
+
+    tool, e, kind, totals = 0, 0.0, None, {}
+    number = re.compile(r"E(-?\d*\.?\d+)")
+    for line in text.splitlines():
+        if line.startswith(";TYPE:"):
+            kind = line[6:].strip()
+        elif line.startswith(";LAYER:"):
+            kind = None
+        elif re.match(r"T\d+\s*$", line):
+            tool, kind = int(line[1:]), None  # (the switch's own retract and prime belong to no feature)
+        elif line.startswith(("G0", "G1", "G92")):
+            found = number.search(line.split(";")[0])
+            if found:
+                value = float(found.group(1))
+                if not line.startswith("G92"):
+                    totals[tool, kind] = totals.get((tool, kind), 0.0) + value - e
+                e = value
+    return totals
+
+
+DUAL_CASES = {
+    "two-models-two-extruders": (EverydayCase(
+        "dome", (("dome", (-18.0, 0.0)), ("through_hole", (18.0, 0.0))),
+        {"machine_extruder_count": 2, "prime_tower_enable": True}, "a model on each extruder, a prime tower",
+        ({"extruder_nr": 0}, {"extruder_nr": 1})), ENGINES),
+    "infill-on-the-second-extruder": (EverydayCase(
+        "dome", (("dome", (0.0, 0.0)),), {"machine_extruder_count": 2, "infill_extruder_nr": 1},
+        "walls and skin on extruder 0, infill on extruder 1", ({"extruder_nr": 0},)), ("4.13",)),
+}
+
+
+@pytest.mark.parametrize("name,version", [(n, v) for n, (_, versions) in DUAL_CASES.items() for v in versions])
+def test_two_extruders_each_keep_their_own_extrusion(option_slices, name, version):
+    case = DUAL_CASES[name][0]
+    sliced = _slice(option_slices, case, version)
+    original, processed, report, result = _process(sliced, footer=True)
+    assert result.ok, result.report()
+    assert report.layers_processed >= 20, report.format_table()
+    unchanged = check_unchanged(parse_gcode(original), parse_gcode(processed))
+    assert unchanged.ok, unchanged.report()
+    before, after = _extrusion_by_tool(original), _extrusion_by_tool(processed)
+    fill_tools = {tool for tool, kind in before if kind == "FILL" and before[tool, kind] > 10.0}
+    assert fill_tools == ({0, 1} if len(case.models) == 2 else {1}), before
+    for key in set(before) | set(after):
+        if key[1] == "FILL":
+            assert after.get(key, 0.0) == pytest.approx(before[key], rel=0.03), (key, before, after)
+        else:
+            assert after.get(key, 0.0) == pytest.approx(before.get(key, 0.0), abs=1e-3), (key, before, after)
+    for region in report.regions:
+        assert abs(region.measured - region.target) < 0.015, report.format_table()
+
+
+def _modifier_case(offset: tuple, values: dict, exercises: str) -> EverydayCase:
+    return EverydayCase("dome", (("dome", (0.0, 0.0)), ("modifier_box", offset)), {}, exercises, ({}, values))
+
+
+MODIFIER_CASES = {
+    # name: (case, the modifier's density, %)
+    "infill-mesh": (_modifier_case((0.0, 0.0), {"infill_mesh": True, "infill_sparse_density": 60},
+                                   "an infill mesh over the dome's middle, with the print's 2 walls and skin"), 60.0),
+    "infill-mesh-one-wall": (_modifier_case((5.0, 5.0), {"infill_mesh": True, "infill_sparse_density": 40,
+                                                         "wall_line_count": 1},
+                                            "an infill mesh with a wall of its own, off centre"), 40.0),
+    "infill-mesh-no-walls": (_modifier_case((4.0, -3.0), {"infill_mesh": True, "infill_sparse_density": 50,
+                                                          "wall_line_count": 0},
+                                            "an infill mesh, wall count 0"), 50.0),
+    "cutting-mesh": (_modifier_case((0.0, 0.0), {"cutting_mesh": True, "infill_sparse_density": 60,
+                                                 "wall_line_count": 1},
+                                    "a cutting mesh with a wall, denser"), 60.0),
+    "cutting-mesh-two-walls": (_modifier_case((6.0, 0.0), {"cutting_mesh": True, "infill_sparse_density": 10,
+                                                           "wall_line_count": 2},
+                                              "a cutting mesh with two walls, sparser, over the dome's edge"), 10.0),
+}
+
+
+@pytest.mark.parametrize("version", ENGINES)
+@pytest.mark.parametrize("name", sorted(MODIFIER_CASES))
+def test_infill_and_cutting_meshes_keep_their_walls_and_density(option_slices, name, version):
+    """A modifier box over the dome: its walls and skin, where it has them, stay clear of the dome's new
+    infill (before: 1.0-1.2 % of the new infill outside Cura's area, up to 349 mm on skin and the box's
+    inside filled twice); the box gets its own density, the dome outside it the print's."""
+    case, box_density = MODIFIER_CASES[name]
+    sliced = _slice(option_slices, case, version)
+    _, _, report, result = _process(sliced, footer=True)
+    assert result.ok, result.report()
+    assert result.figures["on_wall_mm"] <= 2.0, result.report()
+    assert report.layers_processed >= 20, report.format_table()
+    regions = {region.name: region for region in report.regions}
+    base, box = regions["base"], regions["mesh modifier_box.stl"]
+    assert base.target == pytest.approx(DENSITY / 100) and abs(base.measured - base.target) < 0.015, \
+        report.format_table()
+    # (a cutting mesh's density is not in the footer: its few lines tell it, as Cura prints it: 10 % as 11 %)
+    assert abs(box.target - box_density / 100) < 0.02 and abs(box.measured - box.target) < 0.03, \
+        report.format_table()
+    assert abs(report.filament_after_mm / report.filament_before_mm - 1.0) < 0.03, report.format_table()

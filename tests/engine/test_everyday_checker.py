@@ -2,7 +2,7 @@
 
 Every check of everyday_check.py is shown to fail on a deliberately broken file
 (infill across a hole, infill over skin, an island left empty, half the infill
-removed), so that none of them can pass by construction; and a processed file
+removed, infill across an infill mesh's walls), so that none of them can pass by construction; and a processed file
 with different but correct infill passes, so that none of them merely compares
 texts.  Those files are written here, Cura style, without CuraEngine.
 
@@ -271,6 +271,17 @@ def test_an_island_without_infill_fails_the_island_check():
     assert any(p.startswith("islands: layer 5:") for p in result.problems)
 
 
+def test_an_island_of_cura_stubs_only_has_nothing_to_lose():
+    """Cura's FILL runs shorter than a line width (stubs in a sliver between walls and skin) print as
+    blobs: they do not make an island count; a run of short segments a line width long does."""
+    joined = np.array([[[0.0, 0.0], [0.2, 0.0]], [[0.2, 0.0], [0.4, 0.0]], [[0.4, 0.0], [0.6, 0.0]]])
+    stubs = np.array([[[5.0, 5.0], [5.16, 5.16]], [[6.0, 5.0], [5.84, 5.16]]])
+    line = np.array([[[0.0, 3.0], [1.0, 3.0]]])
+    kept = ec._without_stubs(np.concatenate([joined, stubs, line]), LINE_WIDTH)
+    assert kept.tolist() == np.concatenate([joined, line]).tolist()
+    assert len(ec._without_stubs(stubs, LINE_WIDTH)) == 0
+
+
 def test_coverage_drops_when_half_the_infill_is_removed():
     model = ring()
     full = model.check()
@@ -280,6 +291,55 @@ def test_coverage_drops_when_half_the_infill_is_removed():
     assert any(p.startswith("coverage") for p in half.problems)
     # the removed half is a place without infill, not infill in a wrong place
     assert half.figures["outside_mm"] == 0 and half.figures["material_mm"] == 0
+
+
+def _nested_mesh_files(host_fill_of) -> tuple[str, str, str]:
+    """A 24 mm square with an 8 mm infill mesh inside it that has walls of its own (Cura's infill_mesh).
+
+    Cura's host infill stops at the inner mesh's outer wall; `host_fill_of(number, host_area, inner_part)`
+    gives the processed file's host infill.
+    """
+    section = box(98, 98, 122, 122)
+    inner = box(104, 104, 112, 112)
+    host_area = section.buffer(-WALLS, join_style=2)
+    walls = outline_segments(section.buffer(-LINE_WIDTH / 2, join_style=2))
+    inner_walls = [("WALL-OUTER", outline_segments(inner.buffer(-LINE_WIDTH / 2, join_style=2))),
+                   ("WALL-INNER", outline_segments(inner.buffer(-1.5 * LINE_WIDTH, join_style=2)))]
+    inner_area = inner.buffer(-WALLS, join_style=2)
+    original, processed, reference = [], [], []
+    for number in range(6):
+        angle = 45.0 if number % 2 == 0 else 135.0
+        host = hatch(host_area.difference(inner), SPACING, angle)
+        dense = [hatch(host_area.difference(inner), LINE_WIDTH, 0.0), hatch(inner_area, LINE_WIDTH, 0.0)]
+        inner_fill = hatch(inner_area, 1.0, angle)
+        common = [("WALL-OUTER", walls)]
+        original.append(common + [("FILL", host)] + inner_walls + [("FILL", inner_fill)])
+        processed.append(common + [("FILL", host_fill_of(number, host_area, inner))] + inner_walls
+                         + [("FILL", inner_fill)])
+        reference.append(common + [("FILL", dense[0])] + inner_walls + [("FILL", dense[1])])
+    return write_gcode(original), write_gcode(processed), write_gcode(reference)
+
+
+def _check_nested(host_fill_of) -> ec.EverydayResult:
+    section = box(98, 98, 122, 122)
+    files = _nested_mesh_files(host_fill_of)
+    return ec.check_everyday(*files, lambda z: section if 0 < z < 6 * LAYER_HEIGHT else Polygon(), SPACING, LINE_WIDTH)
+
+
+def test_host_infill_across_an_infill_mesh_with_walls_fails_the_walls_check():
+    """The infill mesh's region is inside the reference area (its own dense lines): containment sees
+    only the gap its walls leave there; check 6 sees the host's infill printed across them."""
+    good = _check_nested(lambda number, area, inner: hatch(area.difference(inner), SPACING, 20.0 + 30 * number))
+    assert good.ok, good.report()
+    assert good.figures["on_wall_mm"] <= 0.5 * good.figures["layers_checked"]
+    bad = _check_nested(lambda number, area, inner: hatch(area, SPACING, 45.0 if number % 2 == 0 else 135.0))
+    assert not bad.ok
+    walls = [p for p in bad.problems if p.startswith("walls")]
+    assert len(walls) == 6, bad.report()
+    # (containment sees only the walls' gap in the reference area: less than the walls check)
+    assert bad.figures["outside_mm"] < bad.figures["on_wall_mm"], bad.report()
+    # about 8 host lines cross the inner mesh's two walls twice each, diagonally
+    assert bad.figures["on_wall_mm"] > 6 * 8 * 2 * 0.2
 
 
 def test_small_deviations_are_tolerated():

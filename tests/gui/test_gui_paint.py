@@ -10,7 +10,6 @@ measured independently (infill length x line width / area) in the top 6 mm and b
 
 from __future__ import annotations
 
-import json
 import math
 import re
 import shutil

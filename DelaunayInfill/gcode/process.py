@@ -404,7 +404,8 @@ _PAIRED_LINE_PATTERNS = frozenset({"tetrahedral", "quarter_cubic", "cross", "cro
 
 
 #: a part with too few lines for families takes the footer's density while its lines' length over its
-#: area, summed over the layers, lies within this factor of it (Cura's clipped lines read 0.8-1.25 x)
+#: area, summed over the layers, lies within this factor of it (a 10 % cutting mesh in a 20 % print
+#: reads 11-12 %)
 _FEW_LINES_AGREE = 0.7
 
 
@@ -419,11 +420,13 @@ class _RegionTally:
     last_chunk: int = -1
 
 
-def _tally_added(before: tuple | None, target: float, length: float, area: float, target_area: float) -> tuple:
-    """What a layer added to one region's tally: (target, length, area), its target the layer's mean."""
+def _tally_added(before: tuple | None, target: float, length: float, area: float, target_area: float,
+                 mixed: bool) -> tuple:
+    """What a layer added to one region's tally: (target, length, area), its target the layer's mean
+    where the region's target has changed."""
     if before is not None:
         length, area, target_area = length - before[1], area - before[2], target_area - before[3]
-    return (target_area / area if area > 1e-9 else target), length, area
+    return (target_area / area if mixed and area > 1e-9 else target), length, area
 
 
 @dataclass
@@ -854,7 +857,7 @@ class _Run:
         """The report's running totals (what a layer adds to them is what its repeats add again)."""
         r = self.report
         return (tuple(getattr(r, name) for name in _COUNTED), dict(self.e_before), dict(self.e_delta),
-                {name: (t.target, t.length, t.area, t.target_area) for name, t in self.tally.items()}, self.time_delta)
+                {name: (t.target, t.length, t.area, t.target_area, t.mixed) for name, t in self.tally.items()}, self.time_delta)
 
     def _region_sections(self, z: float) -> list:
         z_slice = self._slice_z(z)
@@ -872,8 +875,7 @@ class _Run:
             tuple(b - a for a, b in zip(counted0, counted1, strict=True)),
             {k: v - e_before0.get(k, 0.0) for k, v in e_before1.items()},
             {k: v - e_delta0.get(k, 0.0) for k, v in e_delta1.items()},
-            {k: _tally_added(tally0.get(k), t, length, area, target_area)
-             for k, (t, length, area, target_area) in tally1.items()},
+            {k: _tally_added(tally0.get(k), *now) for k, now in tally1.items()},
             time1 - time0,
         )
         record.extra["regions"] = sections

@@ -695,14 +695,15 @@ class EverydaySliceCache:
 
 
 def render(out_dir: str, columns: int = 6) -> str:
-    """Draw every model of :data:`MODELS` (matplotlib 3-D) into ``out_dir/everyday-models.png``."""
+    """Draw every model of :data:`MODELS` but the modifier box (matplotlib 3-D) into
+    ``out_dir/everyday-models.png``."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    names = list(MODELS)
+    names = [name for name in MODELS if name != "modifier_box"]
     rows = math.ceil(len(names) / columns)
     figure = plt.figure(figsize=(3.0 * columns, 3.0 * rows))
     elevation, azimuth = np.radians(28.0), np.radians(-60.0)

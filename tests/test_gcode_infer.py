@@ -119,3 +119,26 @@ def test_no_skin_lines_tell_no_line_width():
 
     parse = parse_layer(_walls_layer(1), MachineState(), RetractionModel())
     assert skin_line_width(parse) is None
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_nearest_other_move_is_the_exact_point_to_segment_distance(seed):
+    """The tree of samples only finds the candidates; the distance is exact, a left-out move never
+    counts, and nothing beyond the reach does (checked against every point x move pair)."""
+    from DelaunayInfill.gcode.infer import _nearest_other_move
+
+    rng = np.random.default_rng(seed)
+    start = rng.uniform(0, 20, (300, 2))
+    moves = np.stack([start, start + rng.normal(0, 3, (300, 2))], axis=1)
+    points = rng.uniform(0, 20, (80, 2))
+    left_out = np.stack([rng.integers(0, 300, 80), rng.integers(-1, 300, 80)], axis=1)
+    got = _nearest_other_move(points, moves, left_out, 2.0)
+    a, d = moves[:, 0], moves[:, 1] - moves[:, 0]
+    rel = points[:, None] - a[None]
+    t = np.clip((rel * d).sum(-1) / (d * d).sum(-1), 0, 1)
+    dist = np.hypot(*np.moveaxis(rel - t[..., None] * d, -1, 0))
+    dist[(np.arange(300)[None, None, :] == left_out[:, :, None]).any(axis=1)] = np.inf  # (-1 is none)
+    want = dist.min(axis=1)
+    want = np.where(want < 2.0, want, np.inf)
+    assert np.isfinite(got).sum() > 40
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)

@@ -277,14 +277,27 @@ def sample_segments(segments: np.ndarray, step: float) -> np.ndarray:
     -------
     ndarray, shape (p, 2)
     """
+    return segment_samples(segments, step)[0]
+
+
+def segment_samples(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """`sample_segments`, and which segment each sample lies on.
+
+    Returns
+    -------
+    points : ndarray, shape (p, 2)
+        mm.
+    owner : ndarray, shape (p,)
+        Index into `segments`.
+    """
     if len(segments) == 0:
-        return np.zeros((0, 2))
+        return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
     d = segments[:, 1] - segments[:, 0]
     n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / step).astype(np.int64))
     seg = np.repeat(np.arange(len(segments)), n + 1)
     offsets = np.arange(seg.size) - np.repeat(np.cumsum(n + 1) - (n + 1), n + 1)
     t = offsets / np.repeat(n, n + 1)
-    return segments[seg, 0] + d[seg] * t[:, None]
+    return segments[seg, 0] + d[seg] * t[:, None], seg
 
 
 def fraction_inside(segments: np.ndarray, area, step: float) -> float:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .area import direction_peaks, median_of, runs_of, sample_segments
+from .area import direction_peaks, median_of, runs_of, sample_segments, segment_samples
 from .read import SKIN, WALL_INNER, WALL_OUTER, LayerParse
 
 __all__ = ["wall_line_width", "skin_line_width", "infill_density", "family_spacings", "e_per_mm", "nearest_sample_distance"]
@@ -90,6 +90,54 @@ def wall_line_width(parse: LayerParse, mesh: str) -> float | None:
     return w if 0.05 <= w <= 3.0 else None
 
 
+_SKIN_LINE_WIDTH_MAX = 2.0  # mm: skin lines further apart do not tell a line width
+_SKIN_SAMPLE_STEP = 0.5  # mm between the samples that find a midpoint's nearby moves
+
+
+def _nearest_other_move(points: np.ndarray, moves: np.ndarray, left_out: np.ndarray, reach: float) -> np.ndarray:
+    """Distance from each point to the nearest move not left out for it; inf from `reach` on.
+
+    The moves near each point are found through a tree of their samples
+    (`_SKIN_SAMPLE_STEP` apart, so a move within `reach` has a sample within
+    ``reach + step``), then measured exactly: memory grows with the pairs
+    found, not with points x moves (a curved bottom skin has tens of thousands
+    of moves: a points x moves matrix would take hundreds of MB).
+
+    Parameters
+    ----------
+    points : ndarray, shape (p, 2)
+        mm.
+    moves : ndarray, shape (k, 2, 2)
+        mm.
+    left_out : ndarray of int, shape (p, j)
+        Indices into `moves` each point does not measure to (-1: none).
+    reach : float
+        mm.
+
+    Returns
+    -------
+    ndarray, shape (p,)
+    """
+    nearest = np.full(len(points), np.inf)
+    if len(points) == 0 or len(moves) == 0:
+        return nearest
+    samples, owner = segment_samples(moves, _SKIN_SAMPLE_STEP)
+    pairs = cKDTree(points).sparse_distance_matrix(
+        cKDTree(samples, balanced_tree=False, compact_nodes=False), reach + _SKIN_SAMPLE_STEP, output_type="ndarray")
+    if len(pairs) == 0:
+        return nearest
+    key = np.unique(pairs["i"].astype(np.int64) * len(moves) + owner[pairs["j"]])
+    point, move = key // len(moves), key % len(moves)
+    keep = ~(left_out[point] == move[:, None]).any(axis=1)
+    point, move = point[keep], move[keep]
+    a = moves[move, 0]
+    d = moves[move, 1] - a
+    rel = points[point] - a
+    t = np.clip((rel * d).sum(axis=1) / np.maximum((d * d).sum(axis=1), 1e-12), 0.0, 1.0)
+    np.minimum.at(nearest, point, np.hypot(*(rel - t[:, None] * d).T))
+    return np.where(nearest < reach, nearest, np.inf)
+
+
 def skin_line_width(parse: LayerParse, most: int = 400) -> float | None:
     """Centre distance between neighbouring skin lines, mm: the line width where walls cannot tell it.
 
@@ -106,7 +154,7 @@ def skin_line_width(parse: LayerParse, most: int = 400) -> float | None:
     parse : LayerParse
         One layer, every mesh's skin together.
     most : int
-        Midpoints measured from at most (cost: `most` x skin moves distances).
+        Midpoints measured from at most.
 
     Returns
     -------
@@ -132,28 +180,19 @@ def skin_line_width(parse: LayerParse, most: int = 400) -> float | None:
         return None
     chosen = long_moves[np.linspace(0, long_moves.size - 1, min(most, long_moves.size)).astype(np.int64)]
     mid = 0.5 * (start[chosen] + end[chosen])
-    d = end - start
-    length2 = np.maximum((d * d).sum(axis=1), 1e-12)
-    # point-to-segment distance, midpoints x moves, shape (p, k)
-    rel_x, rel_y = mid[:, 0, None] - start[:, 0], mid[:, 1, None] - start[:, 1]
-    t = np.clip((rel_x * d[:, 0] + rel_y * d[:, 1]) / length2, 0.0, 1.0)
-    dist = np.hypot(rel_x - t * d[:, 0], rel_y - t * d[:, 1])
-    rows = np.arange(len(chosen))
-    dist[rows, chosen] = np.inf
-    # the moves joined to it in the file (a zigzag's turn, a loop's next piece)
+    # left out for each midpoint: its own move and the moves joined to it in the file (a zigzag's
+    # turn, a loop's next piece)
     order = skin[chosen]
-    before = chosen - 1
-    joined = (before >= 0) & (skin[np.maximum(before, 0)] == order - 1)
-    dist[rows[joined], before[joined]] = np.inf
-    after = chosen + 1
-    joined = (after < len(skin)) & (skin[np.minimum(after, len(skin) - 1)] == order + 1)
-    dist[rows[joined], after[joined]] = np.inf
-    nearest = dist.min(axis=1)
+    before, after = chosen - 1, chosen + 1
+    before = np.where((before >= 0) & (skin[np.maximum(before, 0)] == order - 1), before, -1)
+    after = np.where((after < len(skin)) & (skin[np.minimum(after, len(skin) - 1)] == order + 1), after, -1)
+    nearest = _nearest_other_move(mid, np.stack([start, end], axis=1), np.stack([chosen, before, after], axis=1),
+                                  _SKIN_LINE_WIDTH_MAX)
     nearest = nearest[np.isfinite(nearest) & (nearest >= 0.05)]
     if nearest.size < 10:
         return None
     w = median_of(nearest)
-    if not 0.1 <= w <= 2.0 or np.mean(np.abs(nearest - w) <= 0.1 * w) < 0.5:
+    if not 0.1 <= w <= _SKIN_LINE_WIDTH_MAX or np.mean(np.abs(nearest - w) <= 0.1 * w) < 0.5:
         return None
     return w
 

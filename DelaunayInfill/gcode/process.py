@@ -933,10 +933,17 @@ class _Run:
             return ms.density
         if self.s.density is not None:
             return self.s.density
-        footer = self._footer_density(mesh, fill, lw, area.area if area is not None and alone else None)
-        if footer is not None:
-            return footer
         facts = self._facts(mesh)
+        wanted, paired = self._footer_density(facts)
+        if paired:
+            return wanted
+        if wanted is not None:
+            spacings = family_spacings(fill, lw) if len(fill) >= 12 else None
+            # this layer's few lines counted first: the footer is taken while their sum agrees
+            counted = spacings is None and self._count_few_lines(
+                facts, fill, lw, wanted, area.area if area is not None and alone else None)
+            if self._lines_agree(facts, wanted, spacings, counted, lw):
+                return wanted
         if len(fill) < 12 and facts.few_lines_chunk == self.chunks_seen and facts.density is None:
             return facts.few_lines_mm * lw / facts.few_lines_area  # what its lines said so far, not one layer's few
         d = facts.density
@@ -957,38 +964,48 @@ class _Run:
                 d = facts.density = here
         return d
 
-    def _footer_density(self, mesh: str, fill: np.ndarray, lw: float, area: float | None = None) -> float | None:
-        """Cura's ``infill_sparse_density`` from the file's settings footer, for a mesh whose lines agree.
+    def _footer_density(self, facts: _MeshFacts) -> tuple[float | None, bool]:
+        """Cura's ``infill_sparse_density`` from the file's settings footer (None: none), and whether it
+        holds whatever the lines say (a pattern whose lines pair up: their gaps tell no density)."""
+        extruder = facts.extruder or 0
+        wanted = self.footer.infill_density(extruder)
+        if wanted is None or wanted <= 0.0:
+            return None, False
+        return wanted, (self.s.infill_pattern or self.footer.infill_pattern(extruder)) in _PAIRED_LINE_PATTERNS
+
+    def _lines_agree(self, facts: _MeshFacts, wanted: float, spacings: list | None, counted: bool, lw: float) -> bool:
+        """Whether a mesh's lines agree with the footer's density `wanted`.
 
         The footer holds the print's settings, not per-model ones: a mesh whose
         lines form clear families at another density (more than a quarter off)
         has a per-model density of its own, which its lines tell; so does a
-        part with too few lines for families whose lines' length over its
-        `area` (mm², a mesh without modifiers), summed over such layers so
-        far, is off the footer's by more than a factor 1.4 (a 10 % cutting
-        mesh in a 20 % print: Cura's lines there read 12 %).
+        part with too few lines for families (`counted`) whose lines' length
+        over its area, summed over such layers so far (`_count_few_lines`), is
+        off the footer's by more than a factor 1.4 (a 10 % cutting mesh in a
+        20 % print: Cura's lines there read 12 %).
         """
-        wanted = self.footer.infill_density(self._facts(mesh).extruder or 0)
-        if wanted is None or wanted <= 0.0:
-            return None
-        pattern = self.s.infill_pattern or self.footer.infill_pattern(self._facts(mesh).extruder or 0)
-        if pattern in _PAIRED_LINE_PATTERNS:
-            return wanted
-        spacings = family_spacings(fill, lw) if len(fill) >= 12 else None
-        if spacings is not None and abs(sum(lw / sp for sp in spacings) - wanted) > 0.25 * wanted:
-            return None
-        # (only over two line spacings square or more: a small island's few clipped lines say little)
-        # (gradual infill's sparser steps are replaced at the full density: not a density of its own)
-        if spacings is None and len(fill) and area and area >= (4.0 * lw / wanted) ** 2 and not self.gradual_steps:
-            facts = self._facts(mesh)
-            if facts.few_lines_chunk != self.chunks_seen:
-                facts.few_lines_chunk = self.chunks_seen
-                facts.few_lines_mm += float(np.hypot(*(fill[:, 1] - fill[:, 0]).T).sum())
-                facts.few_lines_area += area
+        if spacings is not None:
+            return abs(sum(lw / sp for sp in spacings) - wanted) <= 0.25 * wanted
+        if counted:
             by_length = facts.few_lines_mm * lw / facts.few_lines_area
-            if not _FEW_LINES_AGREE * wanted <= by_length <= wanted / _FEW_LINES_AGREE:
-                return None
-        return wanted
+            return _FEW_LINES_AGREE * wanted <= by_length <= wanted / _FEW_LINES_AGREE
+        return True
+
+    def _count_few_lines(self, facts: _MeshFacts, fill: np.ndarray, lw: float, wanted: float,
+                         area: float | None) -> bool:
+        """Add this layer's lines and area to the mesh's few-lines sums (once a chunk); False: not such a part.
+
+        Only parts over two line spacings square count (a small island's few clipped lines say little),
+        and not with gradual infill (its sparser steps are replaced at the full density: not a density of
+        its own).
+        """
+        if not len(fill) or not area or area < (4.0 * lw / wanted) ** 2 or self.gradual_steps:
+            return False
+        if facts.few_lines_chunk != self.chunks_seen:
+            facts.few_lines_chunk = self.chunks_seen
+            facts.few_lines_mm += float(np.hypot(*(fill[:, 1] - fill[:, 0]).T).sum())
+            facts.few_lines_area += area
+        return True
 
     def _region_mesh_density(self, mesh: str, fill: np.ndarray, lw: float, area) -> float:
         ms = self.s.mesh(mesh)

@@ -30,14 +30,15 @@ from .density import DensityMap, ZoneRaster
 from .geometry import boundary_segments, contains_xy, to_multipolygon, unary_union
 from .routing import clip_segments, split_segments
 
-__all__ = ["RasterMeter", "ZoneMeter", "measured_density", "meter_for", "raster_meter", "segment_length",
-           "zone_interiors"]
+__all__ = ["RasterMeter", "ZoneMeter", "border_bands", "measured_density", "meter_for", "raster_meter",
+           "segment_length", "zone_interiors"]
 
 _THIN = 1.4  # zone interiors: a zone of mean width under this many line widths is kept whole
 _FEW = 48  # zone meter: up to this many pieces to cut query the edges' tree (no tree of their own)
 _CELL = 0.45  # several sharp-border zones: raster cell side, in line widths
 _MAX_CELLS = 120_000  # ... the cell grows beyond that when the footprint's box would need more cells
 _FEW_CELLS = 400  # ... cells wider than a line: a zone of fewer cells is measured exactly instead
+_LATTICE_SIDE = 2.0 * math.sqrt(3.0)  # a triangular lattice of density d has side 2 sqrt(3) w / d (the sparse spacing)
 
 
 def segment_length(segments: np.ndarray) -> float:
@@ -493,3 +494,38 @@ def meter_for(area, dmap: DensityMap, width: float) -> ZoneMeter | RasterMeter:
         # feathered map calibrates the zone cores without a band: the blend between them is the map's.)
         meter = ZoneMeter(zone_interiors(zones, width) if dmap.feather > 0 else zones)
     return meter
+
+
+def border_bands(zones: list, densities, width: float) -> ZoneMeter | None:
+    """A `ZoneMeter` of each zone's band along its borders with denser zones, one sparse spacing wide.
+
+    Issue 15's transition lies on the denser side: a zone's band of one of its own lattice sides
+    s = 2 sqrt(3) w / d next to any denser zone is to print the zone's own density.  Zone k's band
+    is measured as zone k of the meter (empty where no denser zone borders it).
+
+    Parameters
+    ----------
+    zones : list of shapely MultiPolygon
+        The zones (as `DensityMap.zones` gives them, clipped to where the layer prints), mm.
+    densities : sequence of float
+        Each zone's density, fractions.
+    width : float
+        Line width, mm.
+
+    Returns
+    -------
+    ZoneMeter or None
+        None when no zone borders a denser one.
+    """
+    densities = [float(d) for d in densities]
+    bands, any_band = [], False
+    for zone, d in zip(zones, densities):
+        denser = [z for z, other in zip(zones, densities) if other > d and not z.is_empty and z.area > 0]
+        if zone.is_empty or zone.area <= 0 or d <= 0 or not denser:
+            bands.append(to_multipolygon(zone.difference(zone)))
+            continue
+        reach = _LATTICE_SIDE * width / d
+        band = to_multipolygon(zone.intersection(unary_union(denser).buffer(reach, 8)))
+        any_band |= band.area > 0
+        bands.append(band)
+    return ZoneMeter(bands) if any_band else None

@@ -21,7 +21,10 @@ Layouts
     the density is uniform the samples are a triangular lattice (sampler
     ``lattice``, the default): its Delaunay triangles are equilateral, as
     stiff per gram as a line network gets and the same in every direction;
-    Poisson-disk samples fill the bands between zones.
+    Poisson-disk samples fill the bands between zones.  A zone's band along
+    a denser zone (one of its own lattice sides wide) prints the zone's own
+    density: the build tries other samplings of those Poisson-disk samples
+    until it does (`calibration.settled_bands`), so the change lies on the denser side.
 ``paper``
     The paper's pipeline: every density zone is decomposed into convex parts,
     each sampled and triangulated on its own (Bridson sampling by default).
@@ -29,12 +32,21 @@ Layouts
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .calibration import TOLERANCE, balance_zones, edge_cache, fine_tune_scale, paper_choices, scale_limit
+from .calibration import (
+    TOLERANCE,
+    balance_zones,
+    edge_cache,
+    fine_tune_scale,
+    paper_choices,
+    scale_limit,
+    settled_bands,
+)
 from .decomposition import decompose_convex
 from .density import DensityMap, check_line_width, sampling_radius
 from .geometry import as_area, contains_xy, polygons_of, to_multipolygon
@@ -263,14 +275,13 @@ class InfillPattern:
         # Zones under about 6 x 6 of their radii hold a few dozen samples: one sampling to the
         # next moves them by several points, so re-sampling for them alone is noise.
         coarse = settled & np.array([a < _COARSE * radius_of(t) ** 2 for a, t in zip(zone_areas.tolist(), targets)])
-        factors = np.ones(len(targets))
         # A single zone is calibrated by scaling one sampling (continuous, cheap) as soon as
         # the scale needed is within reach; re-sampling only moves it by jumps of 1-2 points.
         single = calibration == "measured" and np.count_nonzero(settled) == 1
         limit = scale_limit(area, reach)
-        bracket = np.array([0.0, np.inf])  # single zone: factors known to print too sparse / too dense
-        best = None
-        for iteration in range(1, _MAX_ITERATIONS + 1):
+        growing_wanted = not single and calibration == "measured"
+
+        def attempt(factors, iteration, between_seed=None) -> _Sampling:
             scaled = dmap.with_densities(targets * factors)
 
             def radius_fn(xy, scaled=scaled):
@@ -278,7 +289,7 @@ class InfillPattern:
 
             # Several zones may be balanced afterwards: it goes on from a growing triangulation.
             points, fixed, growing = _sample(sampling_area, radius_fn, seed, sampler, relax,
-                                             growing=not single and calibration == "measured")
+                                             growing=growing_wanted, between_seed=between_seed)
             triangles, edges = _triangulate(points, growing, radius_fn, dmap, width)
             segments = points[edges]
             inside = meter.inside_all(segments)
@@ -287,54 +298,81 @@ class InfillPattern:
             # Small zones above target can be thinned afterwards; shortfalls cannot.
             error = np.where(small & (measured > targets), 0.25 * error, error)
             worst = float(np.nanmax(np.where(settled, error, 0.0))) if len(error) else 0.0
-            if best is None or worst < best[0]:
-                best = (worst, points, triangles, segments, measured, iteration, edges, inside, growing, fixed)
-            if calibration == "paper" or worst <= (TOLERANCE if single else _LOOP_TOLERANCE):
-                break
-            ok = settled & np.isfinite(measured) & (measured > 0)
-            step = np.where(ok, targets / np.where(ok, measured, 1.0), 1.0)
-            step = np.where(settled & ~ok, 2.0, step)  # a zone with nothing printed: denser
-            step = np.clip(step, 0.5, 2.0)
-            if single:
-                # density ~ 1 / scale: the scale that hits the target is 1 / step
-                k = int(np.flatnonzero(settled)[0])
-                if ok[k] and abs(1.0 / float(step[k]) - 1.0) <= 0.8 * limit:
+            return _Sampling(worst, points, triangles, segments, measured, iteration, edges, inside, growing,
+                             fixed, factors.copy())
+
+        def calibrated(between_seed=None) -> _Sampling:
+            """The calibration loop: the best of up to `_MAX_ITERATIONS` samplings at corrected densities."""
+            factors = np.ones(len(targets))
+            bracket = np.array([0.0, np.inf])  # single zone: factors known to print too sparse / too dense
+            best = None
+            for iteration in range(1, _MAX_ITERATIONS + 1):
+                tried = attempt(factors, iteration, between_seed)
+                measured, worst = tried.measured, tried.worst
+                if best is None or worst < best.worst:
+                    best = tried
+                if calibration == "paper" or worst <= (TOLERANCE if single else _LOOP_TOLERANCE):
                     break
-                # Newton step (density ~ 1 / r), kept inside the bracket of factors printing too
-                # sparse / too dense (coarse patterns print in jumps): else its geometric middle.
-                if measured[k] > targets[k]:
-                    bracket[1] = min(bracket[1], float(factors[k]))
-                else:
-                    bracket[0] = max(bracket[0], float(factors[k]))
-                proposal = float(factors[k] * step[k])
-                if not bracket[0] < proposal < bracket[1]:
-                    proposal = math.sqrt(bracket[0] * bracket[1]) if np.isfinite(bracket).all() else proposal
-                factors[k] = proposal
-                continue
-            if iteration - best[5] >= 2:  # two samplings without improvement: the rest is noise
-                break
-            if not (settled & ~coarse & (np.abs(measured - targets) > _LOOP_TOLERANCE)).any():
-                break  # only coarse zones are off: balancing (below) does better than re-sampling
-            # Half steps (in log scale) down: small zones respond in jumps and
-            # full steps would oscillate; zones that fall short take full steps
-            # up, since what ends up too dense can be thinned afterwards.
-            factors = factors * np.where(small & (step > 1.0), step, np.sqrt(step))
-        worst, points, triangles, segments, measured, iteration, edges, inside, growing, fixed = best
-        # Calibrated on the best sampling: what the radius could not reach.
-        if single and worst > TOLERANCE / 4:
-            points, segments, measured = fine_tune_scale(points, edges, meter, targets, measured, width, limit, area)
-        elif calibration == "measured" and worst > TOLERANCE and np.count_nonzero(settled) > 1:
-            # Zones still off target after calibration (small ones, or dense ones next to a
-            # sparse neighbour that keeps their samples apart) are balanced edge by edge.
-            off = small | (settled & np.isfinite(measured) & (np.abs(measured - targets) > TOLERANCE))
-            # The edges' inside lengths are known already: balancing measures only new edges.
-            points, triangles, segments, measured = balance_zones(
-                points, triangles, meter, targets, width, off, known=edge_cache(edges, inside), growing=growing,
-                limit=lambda segs: _uncrowded(segs, dmap, width), fixed=fixed)
-        keep = _uncrowded(segments, dmap, width)
-        if not keep.all():
-            segments = segments[keep]
-            measured = meter.densities_of(meter.inside_all(segments), width)
+                ok = settled & np.isfinite(measured) & (measured > 0)
+                step = np.where(ok, targets / np.where(ok, measured, 1.0), 1.0)
+                step = np.where(settled & ~ok, 2.0, step)  # a zone with nothing printed: denser
+                step = np.clip(step, 0.5, 2.0)
+                if single:
+                    # density ~ 1 / scale: the scale that hits the target is 1 / step
+                    k = int(np.flatnonzero(settled)[0])
+                    if ok[k] and abs(1.0 / float(step[k]) - 1.0) <= 0.8 * limit:
+                        break
+                    # Newton step (density ~ 1 / r), kept inside the bracket of factors printing too
+                    # sparse / too dense (coarse patterns print in jumps): else its geometric middle.
+                    if measured[k] > targets[k]:
+                        bracket[1] = min(bracket[1], float(factors[k]))
+                    else:
+                        bracket[0] = max(bracket[0], float(factors[k]))
+                    proposal = float(factors[k] * step[k])
+                    if not bracket[0] < proposal < bracket[1]:
+                        proposal = math.sqrt(bracket[0] * bracket[1]) if np.isfinite(bracket).all() else proposal
+                    factors[k] = proposal
+                    continue
+                if iteration - best.iteration >= 2:  # two samplings without improvement: the rest is noise
+                    break
+                if not (settled & ~coarse & (np.abs(measured - targets) > _LOOP_TOLERANCE)).any():
+                    break  # only coarse zones are off: balancing (below) does better than re-sampling
+                # Half steps (in log scale) down: small zones respond in jumps and
+                # full steps would oscillate; zones that fall short take full steps
+                # up, since what ends up too dense can be thinned afterwards.
+                factors = factors * np.where(small & (step > 1.0), step, np.sqrt(step))
+            return best
+
+        def finished(best: _Sampling) -> _Sampling:
+            """The sampling calibrated on: what the radius could not reach, and crowded nodes thinned."""
+            points, triangles, segments, measured = best.points, best.triangles, best.segments, best.measured
+            if single and best.worst > TOLERANCE / 4:
+                points, segments, measured = fine_tune_scale(points, best.edges, meter, targets, measured, width,
+                                                             limit, area)
+            elif calibration == "measured" and best.worst > TOLERANCE and np.count_nonzero(settled) > 1:
+                # Zones still off target after calibration (small ones, or dense ones next to a
+                # sparse neighbour that keeps their samples apart) are balanced edge by edge.
+                off = small | (settled & np.isfinite(measured) & (np.abs(measured - targets) > TOLERANCE))
+                # The edges' inside lengths are known already: balancing measures only new edges.
+                points, triangles, segments, measured = balance_zones(
+                    points, triangles, meter, targets, width, off, known=edge_cache(best.edges, best.inside),
+                    growing=best.growing, limit=lambda segs: _uncrowded(segs, dmap, width), fixed=best.fixed)
+            keep = _uncrowded(segments, dmap, width)
+            if not keep.all():
+                segments = segments[keep]
+                measured = meter.densities_of(meter.inside_all(segments), width)
+            error = np.where(settled, np.abs(measured - targets), 0.0)
+            return dataclasses.replace(best, points=points, triangles=triangles, segments=segments,
+                                       measured=np.asarray(measured),
+                                       worst=float(np.nanmax(error)) if len(error) else 0.0)
+
+        done = finished(calibrated())
+        if sampler == "lattice" and growing_wanted and np.count_nonzero(settled) > 1:
+            # (a coarse zone's band: one sampling to the next moves it by jumps, as the zone itself)
+            done = settled_bands(done, lambda between_seed: finished(calibrated(between_seed)),
+                                 dmap.zones(printed), targets, width, settled & ~coarse)
+        points, triangles, segments, measured, iteration = (
+            done.points, done.triangles, done.segments, done.measured, done.iteration)
         return cls(segments, points, triangles, area, dmap, width, "seamless", calibration, list(measured), iteration)
 
     @classmethod
@@ -441,7 +479,25 @@ class InfillPattern:
         }
 
 
-def _sample(area, radius_fn, seed: int, sampler: str, relax: int, growing: bool):
+@dataclass
+class _Sampling:
+    """One sampling of the seamless build's calibration: its pattern and how far its zones are off."""
+
+    worst: float  # the worst zone's error (fraction; small zones above target count a quarter)
+    points: np.ndarray  # (n, 2) mm
+    triangles: np.ndarray  # (t, 3) indices into points
+    segments: np.ndarray  # (e, 2, 2) mm: the edges kept
+    measured: np.ndarray  # (zones,) fractions
+    iteration: int  # of the calibration loop
+    edges: np.ndarray  # (e, 2) indices into points
+    inside: np.ndarray  # (zones, e) mm of each edge inside each zone
+    growing: object  # its GrowingDelaunay, or None
+    fixed: int  # how many of the first points lie on a lattice
+    factors: np.ndarray  # (zones,) the density factors it was sampled at
+    band_error: float = 0.0  # the worst border band's error (fraction), where measured
+
+
+def _sample(area, radius_fn, seed: int, sampler: str, relax: int, growing: bool, between_seed: int | None = None):
     """Samples of `area` at the radius field `radius_fn` (one pass of the seamless build).
 
     Parameters
@@ -457,6 +513,8 @@ def _sample(area, radius_fn, seed: int, sampler: str, relax: int, growing: bool)
     growing : bool
         Also a growing triangulation of the samples (balancing refines it): qhull's
         incremental one, the sampler's own when it made one (the same triangles).
+    between_seed : int, optional
+        ``"lattice"``: another sampling of the Poisson-disk samples between the lattices.
 
     Returns
     -------
@@ -465,11 +523,12 @@ def _sample(area, radius_fn, seed: int, sampler: str, relax: int, growing: bool)
         of them, or None (not asked for, or qhull refuses the points).
     """
     if growing and sampler in ("fast", "lattice") and not relax:
-        points, qhull, fixed = sample_triangulated(area, radius_fn, seed=seed, lattice=sampler == "lattice")
+        points, qhull, fixed = sample_triangulated(area, radius_fn, seed=seed, lattice=sampler == "lattice",
+                                                   between_seed=between_seed if sampler == "lattice" else None)
         return points, fixed, GrowingDelaunay(points, qhull) if qhull is not None else growing_delaunay(points)
     fixed = 0  # relaxation leaves lattice points where they are (they are the regular part)
     if sampler == "lattice":
-        points, fixed = sample_lattice(area, radius_fn, seed=seed)
+        points, fixed = sample_lattice(area, radius_fn, seed=seed, between_seed=between_seed)
     else:
         points = sample_poisson_disk(area, radius_fn, seed=seed, method=sampler)
     if relax:

@@ -403,6 +403,7 @@ _RING_RADII = 1.0  # ... on a ring of this many radii around it
 # 20 % in a 60 % part (about 4 sides across) measured 0.80 of a uniform pattern's C_min / rho with
 # its lattice against 0.74 with Poisson-disk samples (`bench/bench_regions.py`, 3 seeds).
 _LATTICE_AREA = 4.0
+_BETWEEN_SALT = 1_000_003  # another sampling between the lattices: seeds apart from every seed's own
 
 
 def lattice_frame(seed: int) -> tuple[float, np.ndarray]:
@@ -473,8 +474,12 @@ def _lattice_cores(area, radius_fn, r_lo: float, seed: int) -> np.ndarray:
 
 
 def _sample_fast(area, radius_fn, seed: int, keep: list | None = None, lattice: bool = False,
-                 info: dict | None = None) -> np.ndarray:
-    """`fast` (or `lattice`) sampling; `info` gets ``"lattice"``: how many of the first samples are lattice points."""
+                 info: dict | None = None, between_seed: int | None = None) -> np.ndarray:
+    """`fast` (or `lattice`) sampling; `info` gets ``"lattice"``: how many of the first samples are lattice points.
+
+    `between_seed` (variable radius only): the seed of the Poisson-disk samples alone, the lattices
+    staying those of `seed` (another sampling of the bands between them).
+    """
     info = {} if info is None else info
     info["lattice"] = 0
     r_lo, r_hi = _radius_range(area, radius_fn)
@@ -492,12 +497,17 @@ def _sample_fast(area, radius_fn, seed: int, keep: list | None = None, lattice: 
             return _fill_gaps_constant(area, seeds, r_lo)
         return _fill_gaps_constant(area, _uniform_level(area, spacing, r_lo, seed), r_lo)
     first = _lattice_cores(area, radius_fn, r_lo, seed) if lattice else None
-    samples, samples_r = _variable_level(area, spacing, r_lo, radius_fn, seed, first, info)
+    poisson_seed = seed if between_seed is None else _BETWEEN_SALT * (seed + 1) + between_seed
+    samples, samples_r = _variable_level(area, spacing, r_lo, radius_fn, poisson_seed, first, info)
     return _fill_gaps_variable(area, samples, samples_r, radius_fn, keep=keep)
 
 
-def sample_lattice(region, radius: RadiusLike, *, seed: int = 0) -> tuple[np.ndarray, int]:
+def sample_lattice(region, radius: RadiusLike, *, seed: int = 0,
+                   between_seed: int | None = None) -> tuple[np.ndarray, int]:
     """`sample_poisson_disk` with ``method="lattice"``, and how many of the first samples are lattice points.
+
+    `between_seed`: another sampling of the Poisson-disk samples between the lattices (the lattices
+    are the seed's); None: the seed's own.
 
     Returns
     -------
@@ -506,7 +516,8 @@ def sample_lattice(region, radius: RadiusLike, *, seed: int = 0) -> tuple[np.nda
         Poisson-disk samples between them).
     """
     info = {}
-    points = _sample_fast(as_area(region), radius_function(radius), int(seed), lattice=True, info=info)
+    points = _sample_fast(as_area(region), radius_function(radius), int(seed), lattice=True, info=info,
+                          between_seed=between_seed)
     return points, info["lattice"]
 
 
@@ -934,8 +945,11 @@ def sample_poisson_disk(region, radius: RadiusLike, *, seed: int = 0, method: st
     raise ValueError(f"method must be 'fast', 'lattice' or 'bridson', got {method!r}")
 
 
-def sample_triangulated(region, radius: RadiusLike, *, seed: int = 0, lattice: bool = False):
+def sample_triangulated(region, radius: RadiusLike, *, seed: int = 0, lattice: bool = False,
+                        between_seed: int | None = None):
     """`sample_poisson_disk` (``fast``, or ``lattice``) and, where its gap filling triangulated them, the triangulation.
+
+    `between_seed`: as in `sample_lattice`.
 
     Returns
     -------
@@ -946,7 +960,7 @@ def sample_triangulated(region, radius: RadiusLike, *, seed: int = 0, lattice: b
         first samples lie on the lattices.
     """
     keep, info = [], {}
-    points = _sample_fast(as_area(region), radius_function(radius), int(seed), keep, lattice, info)
+    points = _sample_fast(as_area(region), radius_function(radius), int(seed), keep, lattice, info, between_seed)
     return points, (keep[0] if keep else None), info["lattice"]
 
 

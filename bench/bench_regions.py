@@ -13,7 +13,9 @@ with shapely:
   [0, s) and the dense side's first band and the rest of the dense side beyond s.  Issue 15: the
   transition lies on the denser side and is at most one sparse spacing wide, so the sparse side's
   first band is at the sparse density and the dense side is at its density from s on (each within 2
-  points); the dense side's first band is where the change is;
+  points); the dense side's first band is where the change is.  As controls, the same bands in
+  uniform patterns of the sparse and of the dense density (a zone a few lattice sides across swings
+  by itself);
 * **max edges per node** (nodes inside the part) and **short edges**: edges with both ends inside the
   part shorter than a quarter of the local spacing (the triangular lattice's side 2 sqrt(3) w / d at
   the denser end's density).
@@ -35,6 +37,7 @@ uniform pattern of its density.
 Usage::
 
     python3 bench/bench_regions.py [--seeds 5] [--ideal]
+    python3 bench/bench_regions.py --seeds 5 --plot border-profile.png   # the density across one border
 """
 
 from __future__ import annotations
@@ -123,14 +126,18 @@ def run(seeds: int) -> list[dict]:
             band = sparse_side(part, base, region, region_density) if len(regions) == 1 else None
             most, short = node_figures(pattern)
             across = control = None
+            control_dense = float("nan")
             if band is not None:
                 bands = border_bands(part, base, region, region_density)
                 across = {k: 100 * density(printed, z) if z.area > 1.0 else float("nan") for k, z in bands.items()}
                 # the same band in a uniform pattern of the sparse density: how much a band this wide varies anyway
                 uniform = InfillPattern.build(part, min(base, region_density), WIDTH, seed=seed).clip(part).segments
                 control = 100 * density(uniform, bands["sparse 0-1"])
+                if bands["dense beyond 1"].area > 1.0:  # ... and the dense side's rest in a uniform dense pattern
+                    uniform = InfillPattern.build(part, max(base, region_density), WIDTH, seed=seed).clip(part).segments
+                    control_dense = 100 * density(uniform, bands["dense beyond 1"])
             rows.append({
-                "across": across, "control": control, "dense": 100 * max(base, region_density),
+                "across": across, "control": control, "control_dense": control_dense, "dense": 100 * max(base, region_density),
                 "case": name, "seed": seed, "worst_points": 100 * max(abs(e) for e in errors),
                 "errors": errors, "sparse_side": None if band is None else 100 * density(printed, band),
                 "sparse": 100 * min(base, region_density), "max_edges": most, "short": short, "ms": 1000 * seconds,
@@ -159,13 +166,19 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def _range(rows: list[dict], key: str) -> str:
+    values = [r[key] for r in rows if not math.isnan(r[key])]
+    return f"{min(values):.1f}-{max(values):.1f}" if values else "-"
+
+
 def format_across(rows: list[dict]) -> str:
     """The density across each single region's border in bands one sparse spacing wide (min-max over seeds)."""
     keys = ("sparse 1-2", "sparse 0-1", "dense 0-1", "dense beyond 1")
     out = ["| case | seeds | sparse side 1-2 spacings (%) | sparse side 0-1 spacing (%) | dense side 0-1 spacing (%) "
            "| dense side beyond 1 spacing (%) | targets (%) | band on the denser side, at most one sparse spacing "
-           "| a uniform pattern of the sparse density, sparse side 0-1 spacing (%) |",
-           "|---|---:|---:|---:|---:|---:|---:|---|---:|"]
+           "| a uniform pattern of the sparse density, sparse side 0-1 spacing (%) "
+           "| a uniform pattern of the dense density, dense side beyond 1 spacing (%) |",
+           "|---|---:|---:|---:|---:|---:|---:|---|---:|---:|"]
     worst = 0.0
     for name in CASES:
         mine = [r for r in rows if r["case"] == name and r["across"] is not None]
@@ -181,7 +194,7 @@ def format_across(rows: list[dict]) -> str:
         worst = max(worst, max(misses))
         out.append(f"| {name} | {len(mine)} | " + " | ".join(cells) + f" | {mine[0]['sparse']:.0f} / {mine[0]['dense']:.0f} "
                    f"| {'yes' if max(misses) <= 2.0 else 'no'} (worst {max(misses):.1f} points) "
-                   f"| {min(r['control'] for r in mine):.1f}-{max(r['control'] for r in mine):.1f} |")
+                   f"| {min(r['control'] for r in mine):.1f}-{max(r['control'] for r in mine):.1f} | {_range(mine, 'control_dense')} |")
     out.append("")
     out.append(f"worst of the sparse side's first spacing and the dense side beyond one spacing against their "
                f"targets, every case and seed: {worst:.2f} points (target <= 2)")
@@ -281,12 +294,66 @@ def format_ideal(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+PROFILE_CASE = "box 20 mm at 60 % in 20 %"
+
+
+def border_profile(seeds: int, bins: int = 6) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Density against distance from the region's border, in bins half a sparse spacing wide.
+
+    Returns (bin centres in sparse spacings, negative on the sparse side; one density array in % per seed).
+    """
+    part, base, regions = CASES[PROFILE_CASE]
+    region, region_density = regions[0]
+    s = 2.0 * math.sqrt(3.0) * WIDTH / min(base, region_density)
+    inner = part.buffer(-s)
+    edges = 0.5 * s * np.arange(-bins, bins + 1)  # signed distance: outside the region (sparse) negative
+    centres = 0.5 * (edges[:-1] + edges[1:]) / s
+    out = []
+    for seed in range(seeds):
+        printed = InfillPattern.build(part, base, WIDTH, regions=regions, seed=seed).clip(part).segments
+        values = []
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            # signed distance d (inside the region positive): between region.buffer(-lo) and region.buffer(-hi)
+            band = region.buffer(-lo, 8).difference(region.buffer(-hi, 8)).intersection(inner)
+            values.append(100 * density(printed, band) if band.area > 1.0 else float("nan"))
+        out.append(np.array(values))
+    return centres, out
+
+
+def plot_profile(path: str, seeds: int) -> None:
+    """`border_profile` drawn: one line per seed, the two targets dashed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    centres, per_seed = border_profile(seeds)
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=110)
+    for seed, values in enumerate(per_seed):
+        ax.plot(centres, values, marker="o", ms=3, lw=1, label=f"seed {seed}")
+    ax.axvline(0, color="k", lw=0.8)
+    ax.axhline(20, color="0.5", ls="--", lw=0.8)
+    ax.axhline(60, color="0.5", ls="--", lw=0.8)
+    ax.axvspan(-1, 0, color="tab:blue", alpha=0.06)
+    ax.set_xlabel("distance from the region's border, sparse spacings (20 % side negative)")
+    ax.set_ylabel("printed density, % (bins of half a spacing)")
+    ax.set_title(f"{PROFILE_CASE}: the change lies on the denser side", fontsize=10)
+    ax.legend(fontsize=7, ncol=3)
+    fig.tight_layout()
+    fig.savefig(path)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=5, help="seeds per case (default 5)")
     parser.add_argument("--ideal", action="store_true",
                         help="also measure the ideal junction of two exact lattices (no band) the same way")
+    parser.add_argument("--plot", metavar="PNG", help="draw the density across the border of one case, per seed, and stop")
     args = parser.parse_args(argv)
+    if args.plot:
+        plot_profile(args.plot, args.seeds)
+        print(f"wrote {args.plot}")
+        return 0
     rows = run(args.seeds)
     print(format_table(rows))
     print()

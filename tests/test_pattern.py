@@ -274,6 +274,31 @@ def test_whole_regions_print_their_density(case, seed):
     assert measured_density(printed, sparse_band, 0.4) <= min(base, density) + 0.05
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+@pytest.mark.parametrize("case", list(_WHOLE_REGION_CASES))
+def test_the_change_of_density_lies_on_the_denser_side(case, seed):
+    """Issue 15: across a region's border the sparse side's first band one sparse spacing s wide (the
+    sparse lattice's side 2 sqrt(3) w / d) prints the sparse density within 2 points, and so does the
+    dense side from s on: the change lies in the dense side's first band.  (The sparse band swung by
+    up to 4.6 points from seed to seed before; a uniform pattern's same band by 0.3.)"""
+    base, region, density = _WHOLE_REGION_CASES[case]
+    part = box(0, 0, 80, 80)
+    printed = InfillPattern.build(part, base, 0.4, regions=[(region, density)], seed=seed).clip(part).segments
+    sparse, dense = min(base, density), max(base, density)
+    s = 2.0 * math.sqrt(3.0) * 0.4 / sparse
+    inner = part.buffer(-s)  # (the part's own edge stays out of the bands)
+    if density > base:
+        sparse_band, dense_beyond = region.buffer(s).difference(region), region.buffer(-s)
+    else:
+        sparse_band, dense_beyond = region.difference(region.buffer(-s)), part.difference(region.buffer(s))
+    got = measured_density(printed, sparse_band.intersection(inner), 0.4)
+    assert abs(got - sparse) <= 0.02, (got, sparse)
+    dense_beyond = dense_beyond.intersection(inner)
+    if dense_beyond.area > (2 * s) ** 2:
+        got = measured_density(printed, dense_beyond, 0.4)
+        assert abs(got - dense) <= 0.025, (got, dense)
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_zone_meter_measures_like_clipping(seed):
     """The calibration's fast zone measurement equals exact clipping, crossings included."""
@@ -608,3 +633,19 @@ def test_thinning_leaves_a_lattice_whole_while_other_edges_can_go():
     kept = {tuple(sorted(map(tuple, np.round(s, 9).tolist()))) for s in segments}
     assert sum(tuple(sorted(map(tuple, np.round(points[list(e)], 9).tolist()))) in kept for e in lattice_edges) \
         < len(lattice_edges)
+
+
+def test_border_bands_are_each_zone_one_of_its_spacings_along_denser_zones():
+    """`border_bands`: the sparse zone's band is its part within its own lattice side of the denser
+    zone; the densest zone (no denser neighbour) has none; a zone apart from any denser one neither."""
+    from DelaunayInfill.metering import border_bands
+
+    part = box(0, 0, 80, 80)
+    dense, far = box(30, 30, 50, 50), box(70, 70, 78, 78)
+    zones = [part.difference(dense).difference(far), dense, far]
+    meter = border_bands(zones, [0.2, 0.6, 0.2], 0.4)
+    s = 2.0 * math.sqrt(3.0) * 0.4 / 0.2
+    want = dense.buffer(s, 8).difference(dense).area
+    assert meter.areas[0] == pytest.approx(want, rel=1e-6)
+    assert meter.areas[1] == 0.0 and meter.areas[2] == 0.0
+    assert border_bands(zones[:1], [0.2], 0.4) is None

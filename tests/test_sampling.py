@@ -375,3 +375,20 @@ def test_lattice_sampling_of_a_continuous_radius_is_the_fast_sampling():
     pts, k = sample_lattice(region, radius, seed=2)
     assert k == 0
     np.testing.assert_array_equal(pts, sample_poisson_disk(region, radius, seed=2, method="fast"))
+
+
+def test_another_sampling_between_the_lattices_keeps_the_lattices():
+    """`between_seed` resamples only the Poisson-disk samples between the lattices (the build tries
+    another where a border band prints off its density): the lattice points are the seed's."""
+    region = box(0, 0, 80, 40)
+
+    def radius(xy):
+        return np.where(xy[:, 0] < 40, 1.5, 4.0)
+
+    first, k = sample_lattice(region, radius, seed=3)
+    other, j = sample_lattice(region, radius, seed=3, between_seed=1)
+    np.testing.assert_array_equal(np.unique(first[:k], axis=0), np.unique(other[:j], axis=0))
+    between, between_other = first[k:], other[j:]
+    assert len(between) and len(between_other)
+    assert not np.array_equal(np.unique(between, axis=0), np.unique(between_other, axis=0))
+    np.testing.assert_array_equal(sample_lattice(region, radius, seed=3, between_seed=None)[0], first)

@@ -434,7 +434,8 @@ def _edge_keys(edges: np.ndarray) -> np.ndarray:
     return edges[:, 0].astype(np.int64) * (1 << 32) + edges[:, 1]
 
 
-def settled_bands(best, resample, zones: list, targets: np.ndarray, width: float, measured_zones: np.ndarray):
+def settled_bands(best, resample, zones: list, targets: np.ndarray, width: float, measured_zones: np.ndarray,
+                  printed=None):
     """The calibrated sampling `best`, or another sampling of the Poisson-disk samples between its lattices
     whose zones' bands along denser zones print closer to their zones' densities.
 
@@ -460,6 +461,8 @@ def settled_bands(best, resample, zones: list, targets: np.ndarray, width: float
     width : float
         Line width, mm.
     measured_zones : ndarray of bool, shape (zones,)
+    printed : shapely (Multi)Polygon, optional
+        Where the layer prints (`border_bands`: the bands are measured away from its outline).
 
     Returns
     -------
@@ -468,7 +471,7 @@ def settled_bands(best, resample, zones: list, targets: np.ndarray, width: float
     """
     if not measured_zones.any():
         return best
-    bands = border_bands(zones, targets, width)
+    bands = border_bands(zones, targets, width, printed)
     if bands is None:
         return best
     banded = (bands.areas > 0) & measured_zones

@@ -496,12 +496,14 @@ def meter_for(area, dmap: DensityMap, width: float) -> ZoneMeter | RasterMeter:
     return meter
 
 
-def border_bands(zones: list, densities, width: float) -> ZoneMeter | None:
+def border_bands(zones: list, densities, width: float, printed=None) -> ZoneMeter | None:
     """A `ZoneMeter` of each zone's band along its borders with denser zones, one sparse spacing wide.
 
     Issue 15's transition lies on the denser side: a zone's band of one of its own lattice sides
     s = 2 sqrt(3) w / d next to any denser zone is to print the zone's own density.  Zone k's band
-    is measured as zone k of the meter (empty where no denser zone borders it).
+    is measured as zone k of the meter (empty where no denser zone borders it).  With `printed`
+    (where the layer prints), the band's part within s of its outline is left out where enough
+    of the band stays (a quarter): lines clipped at the part's own edge are not the border's.
 
     Parameters
     ----------
@@ -511,6 +513,8 @@ def border_bands(zones: list, densities, width: float) -> ZoneMeter | None:
         Each zone's density, fractions.
     width : float
         Line width, mm.
+    printed : shapely (Multi)Polygon, optional
+        Where the layer prints, mm.
 
     Returns
     -------
@@ -526,6 +530,9 @@ def border_bands(zones: list, densities, width: float) -> ZoneMeter | None:
             continue
         reach = _LATTICE_SIDE * width / d
         band = to_multipolygon(zone.intersection(unary_union(denser).buffer(reach, 8)))
+        if printed is not None and band.area > 0:
+            core = to_multipolygon(band.intersection(printed.buffer(-reach, 8)))
+            band = core if core.area >= 0.25 * band.area else band
         any_band |= band.area > 0
         bands.append(band)
     return ZoneMeter(bands) if any_band else None

@@ -370,7 +370,7 @@ class InfillPattern:
         if sampler == "lattice" and growing_wanted and np.count_nonzero(settled) > 1:
             # (a coarse zone's band: one sampling to the next moves it by jumps, as the zone itself)
             done = settled_bands(done, lambda between_seed: finished(calibrated(between_seed)),
-                                 dmap.zones(printed), targets, width, settled & ~coarse)
+                                 dmap.zones(printed), targets, width, settled & ~coarse, printed)
         points, triangles, segments, measured, iteration = (
             done.points, done.triangles, done.segments, done.measured, done.iteration)
         return cls(segments, points, triangles, area, dmap, width, "seamless", calibration, list(measured), iteration)
@@ -431,7 +431,7 @@ class InfillPattern:
         return cls(segments, points, triangles, area, dmap, width, "paper", calibration, measured)
 
     # ------------------------------------------------------------------ use
-    def clip(self, area, *, start=None) -> InfillResult:
+    def clip(self, area, *, start=None, end=None) -> InfillResult:
         """The pattern inside one area, chained and ordered.
 
         Parameters
@@ -440,6 +440,8 @@ class InfillPattern:
             A layer's infill area (inside the footprint).
         start : (x, y), optional
             Nozzle position before the infill; the first path starts near it.
+        end : (x, y), optional
+            Where the nozzle goes after the infill (the next feature's start); the route ends near it.
 
         Returns
         -------
@@ -447,7 +449,7 @@ class InfillPattern:
         """
         area = as_area(area, what="infill area")
         segments = clip_segments(self.segments, area)
-        paths, travel = order_paths(chain_segments(segments), start)
+        paths, travel = order_paths(chain_segments(segments), start, end=end)
         return InfillResult(paths, segments, travel, area, self.line_width, self.density_map)
 
     def quality(self) -> dict:

@@ -31,6 +31,7 @@ __all__ = ["clip_segments", "chain_segments", "order_paths", "travel_length", "o
 
 _EPS = 1e-9
 _QUANTUM = 1e-5  # mm: endpoints closer than this are one vertex
+_OR_OPT_MOST = 5000  # order_paths: or-opt on routes of at most this many paths
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -297,7 +298,7 @@ def chain_segments(segments: np.ndarray) -> list[np.ndarray]:
 
 
 def order_paths(
-    paths: list[np.ndarray], start=None, *, rounds: int = 8, window: int = 24
+    paths: list[np.ndarray], start=None, *, end=None, rounds: int = 8, window: int = 24
 ) -> tuple[list[np.ndarray], float]:
     """Order and orient paths to keep travel between them short.
 
@@ -312,6 +313,9 @@ def order_paths(
     paths : list of ndarray, each shape (m, 2)
     start : (x, y), optional
         Where the nozzle is before the first path.
+    end : (x, y), optional
+        Where the nozzle goes after the last path (the next feature's start): the travel there
+        counts too.
     rounds : int
         2-opt rounds at most (0: greedy only); they stop early when a round
         saves less than 0.2 % of the travel.
@@ -353,12 +357,21 @@ def order_paths(
     entry = np.where(flipped, ends_c[order + n], ends_c[order])
     exit_ = np.where(flipped, ends_c[order], ends_c[order + n])
     origin = complex(*np.asarray(start, dtype=float)) if start is not None else entry[0]
+    terminus = complex(*np.asarray(end, dtype=float)) if end is not None else complex(np.nan, np.nan)
     if n >= 2 and rounds > 0:
-        _two_opt(entry, exit_, order, flipped, origin, _moves(n, window, start is not None), rounds)
+        moves = _moves(n, window, start is not None)
+        _two_opt(entry, exit_, order, flipped, origin, moves, rounds, terminus)
+        # (then 2-opt again: a moved path opens new reversals)
+        if n <= _OR_OPT_MOST and _or_opt(entry, exit_, order, flipped,
+                                         origin if start is not None else complex(np.nan, np.nan), terminus, rounds,
+                                         near_paths(ends, n)):
+            _two_opt(entry, exit_, order, flipped, origin if start is not None else entry[0], moves, rounds, terminus)
     out = [paths[i][::-1] if f else paths[i] for i, f in zip(order, flipped)]
     travel = float(np.abs(entry[1:] - exit_[:-1]).sum())
     if start is not None:
         travel += float(abs(entry[0] - origin))
+    if end is not None:
+        travel += float(abs(terminus - exit_[-1]))
     return out, travel
 
 
@@ -391,17 +404,19 @@ def _moves(n: int, window: int, with_start: bool) -> tuple:
 
 
 def _two_opt(entry: np.ndarray, exit_: np.ndarray, order: np.ndarray, flipped: np.ndarray, origin, moves: tuple,
-             rounds: int) -> None:
+             rounds: int, terminus: complex = complex(np.nan, np.nan)) -> None:
     """Rounds of 2-opt on a route, in place: `entry`/`exit_` (n,) complex ends of each position's path,
-    `order` (n,) its path, `flipped` (n,) whether it runs backwards; `origin` the start (complex)."""
+    `order` (n,) its path, `flipped` (n,) whether it runs backwards; `origin` the start, `terminus` the
+    end to reach after the last path (complex; NaN: none)."""
     i, j, valid, nxt, last, prev, after_first, rows = moves
     n = len(order)
     for _ in range(rounds):
         # Reversing positions i..j turns the travels (exit[i-1] -> entry[i]) and
         # (exit[j] -> entry[j+1]) into (exit[i-1] -> exit[j]) and (entry[i] -> entry[j+1]).
         before = np.where(after_first, exit_[prev], origin)
-        old = np.abs(entry[i] - before) + np.where(last, 0.0, np.abs(entry[nxt] - exit_[j]))
-        new = np.abs(exit_[j] - before) + np.where(last, 0.0, np.abs(entry[nxt] - entry[i]))
+        following = np.where(last, terminus, entry[nxt])
+        old = np.abs(entry[i] - before) + _gap_distance(following, exit_[j])
+        new = np.abs(exit_[j] - before) + _gap_distance(following, entry[i])
         gain = np.where(valid, old - new, -np.inf)
         best = gain.argmax(axis=1)
         best_gain = gain[rows, best]
@@ -424,6 +439,113 @@ def _two_opt(entry: np.ndarray, exit_: np.ndarray, order: np.ndarray, flipped: n
             flipped[run] = ~flipped[run][::-1]
         if saved < 2e-3 * float(np.abs(entry[1:] - exit_[:-1]).sum()):
             break
+
+
+def _gap_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """|a - b| of complex points, 0 where either is unknown (NaN: no start, no end to reach)."""
+    d = np.abs(a - b)
+    return np.where(np.isnan(d), 0.0, d)
+
+
+_NEAR_PATHS = 6  # or-opt: each path tries the gaps beside the paths with an end among this many nearest to its ends
+
+
+def near_paths(ends: np.ndarray, n: int) -> np.ndarray:
+    """Per path, the paths with an end among the `_NEAR_PATHS` nearest to either of its ends.
+
+    Parameters
+    ----------
+    ends : ndarray, shape (2 n, 2)
+        Row j < n the head of path j, row n + j its tail, mm.
+    n : int
+
+    Returns
+    -------
+    ndarray of int, shape (n, 2 k)
+        Path indices (a path may list itself; or-opt leaves such a move out).
+    """
+    k = min(_NEAR_PATHS + 1, 2 * n)
+    _, idx = cKDTree(ends).query(ends, k=k)
+    idx = np.asarray(idx).reshape(2 * n, k) % n
+    return np.concatenate([idx[:n], idx[n:]], axis=1)
+
+
+def _near_gaps(order: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """Per position, the gaps beside the positions of its path's `near` paths, and the route's two
+    ends (gap g lies between positions g - 1 and g), shape (n, 4 k + 2)."""
+    n = len(order)
+    position = np.empty(n, dtype=np.int64)
+    position[order] = np.arange(n)
+    beside = position[near[order]]  # (n, 2 k)
+    return np.concatenate([beside, beside + 1, np.zeros((n, 1), np.int64), np.full((n, 1), n)], axis=1)
+
+
+def _or_opt(entry: np.ndarray, exit_: np.ndarray, order: np.ndarray, flipped: np.ndarray, origin: complex,
+            terminus: complex, rounds: int, near: np.ndarray) -> bool:
+    """Rounds of or-opt on a route, in place (arrays as in `_two_opt`; `origin` / `terminus` the start
+    and the end to reach, complex, NaN: none): each path may move, either way round, into another gap.
+
+    2-opt only reverses runs; a short path the greedy order left behind (a stub at the far end of a
+    part, printed on a detour) needs moving.  Taking path p
+    out of its place saves ``|a - p.entry| + |p.exit - b| - |a - b|`` (a, b its neighbours' ends), putting
+    it into gap (c, d) costs ``min(|c - p.entry| + |p.exit - d|, |c - p.exit| + |p.entry - d|) - |c - d|``,
+    scored at once for every path and the gaps beside its `near` paths (`near_paths`, by path; a move
+    far from both of a path's ends only adds travel) and at the route's two ends; per round the best moves that touch none of the same positions are applied; the rounds stop when
+    one saves under 0.2 % of the travel.  Returns whether any path moved.
+    """
+    n = len(order)
+    if n < 3:
+        return False
+    rows = np.arange(n)
+    moved_any = False
+    for _ in range(rounds):
+        before = np.r_[origin, exit_[:-1]]  # (n,) the end each position is reached from
+        after = np.r_[entry[1:], terminus]  # (n,) where each position's path goes next
+        taken_out = _gap_distance(before, entry) + _gap_distance(exit_, after) - _gap_distance(before, after)
+        left = np.r_[origin, exit_]  # (n + 1,) gap g lies between position g - 1 and g
+        right = np.r_[entry, terminus]
+        gaps = _near_gaps(order, near)  # (n, c) candidate gaps of each position's path
+        lg, rg = left[gaps], right[gaps]
+        open_gap = _gap_distance(lg, rg)
+        forward = _gap_distance(lg, entry[:, None]) + _gap_distance(exit_[:, None], rg)
+        backward = _gap_distance(lg, exit_[:, None]) + _gap_distance(entry[:, None], rg)
+        gain = taken_out[:, None] - (np.minimum(forward, backward) - open_gap)
+        gain[(gaps == rows[:, None]) | (gaps == rows[:, None] + 1)] = -np.inf  # next to the path itself: no move
+        pick = gain.argmax(axis=1)
+        best_gain = gain[rows, pick]
+        best = gaps[rows, pick]
+        flip_best = backward[rows, pick] < forward[rows, pick]
+        movers = np.flatnonzero(best_gain > 1e-6)
+        if movers.size == 0:
+            break
+        busy = np.zeros(n + 2, dtype=bool)
+        moves, saved = [], 0.0
+        for p in movers[np.argsort(-best_gain[movers])].tolist():
+            g = int(best[p])
+            touched = [p - 1, p, p + 1, g - 1, g]
+            if busy[np.clip(touched, 0, n)].any():
+                continue
+            busy[np.clip(touched, 0, n)] = True
+            moves.append((p, g, bool(flip_best[p])))
+            saved += float(best_gain[p])
+        # The new order: a moved path leaves its position and enters gap g, just before position g
+        # (at most one path enters a gap: its neighbours are busy then).
+        key = np.arange(n, dtype=float)
+        turn_of = np.zeros(n, dtype=bool)
+        for p, g, flip in moves:
+            key[p] = g - 0.5
+            turn_of[p] = flip
+        at = np.argsort(key, kind="stable")
+        turn = turn_of[at]
+        new_entry = np.where(turn, exit_[at], entry[at])
+        new_exit = np.where(turn, entry[at], exit_[at])
+        entry[:], exit_[:] = new_entry, new_exit
+        order[:] = order[at]
+        flipped[:] = flipped[at] ^ turn
+        moved_any = True
+        if saved < 2e-3 * float(_gap_distance(np.r_[origin, exit_], np.r_[entry, terminus]).sum()):
+            break
+    return moved_any
 
 
 def travel_length(paths: list[np.ndarray], start=None) -> float:
@@ -499,8 +621,10 @@ def plan_runs(paths: list[np.ndarray], ends: np.ndarray, cost_of, rounds: int = 
             if len(run) >= 2:
                 key = (i, *map(id, run))
                 if key not in routed:
-                    forward, _ = order_paths(run, (b[0], b[1]) if math.isfinite(b[0]) else None)
-                    backward, _ = order_paths(run, (b[2], b[3]) if math.isfinite(b[2]) else None)
+                    head = (b[0], b[1]) if math.isfinite(b[0]) else None
+                    tail = (b[2], b[3]) if math.isfinite(b[2]) else None
+                    forward, _ = order_paths(run, head, end=tail)
+                    backward, _ = order_paths(run, tail, end=head)
                     routed[key] = [forward, [p[::-1] for p in backward[::-1]]]
                 options[-1] += routed[key]
         flat = [(run, ends[i]) for i, opts in enumerate(options) for run in opts]

@@ -173,3 +173,57 @@ def test_blocks_of_islands_of_their_own_take_their_islands_paths():
     assert _island_runs(paths, ends, np.array([[5.0, 5.0], [6.0, 5.0]]), part) is None
     stray = [*paths, np.array([[40.0, 1.0], [45.0, 1.0]])]
     assert _island_runs(stray, ends, anchors, MultiPolygon([*part.geoms, box(39, 0, 50, 10)])) is None
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.integers(3, 90), st.booleans())
+def test_moving_paths_and_the_end_to_reach_never_add_travel(seed, count, with_end):
+    """Or-opt (a path moved, either way round, into another gap) after 2-opt: never more travel than
+    2-opt alone, counted to the end to reach when one is given, and every path kept once."""
+    from unittest import mock
+
+    from DelaunayInfill import routing
+
+    rng = np.random.default_rng(seed)
+    paths = [rng.uniform(0, 100, (int(rng.integers(2, 5)), 2)) for _ in range(count)]
+    end = (float(rng.uniform(0, 100)), float(rng.uniform(0, 100))) if with_end else None
+    with mock.patch.object(routing, "_OR_OPT_MOST", 0):
+        _, t_two_opt = order_paths(paths, start=(0.0, 0.0))
+    moved, t_moved = order_paths(paths, start=(0.0, 0.0), end=end)
+    hop = 0.0 if end is None else float(np.hypot(*(moved[-1][-1] - np.array(end))))
+    assert abs(t_moved - (travel_length(moved, start=(0.0, 0.0)) + hop)) < 1e-6
+    if end is None:
+        assert t_moved <= t_two_opt + 1e-9
+    key = lambda p: tuple(sorted([tuple(p[0]), tuple(p[-1])]))  # noqa: E731
+    assert sorted(map(key, moved)) == sorted(map(key, paths))
+
+
+@pytest.mark.parametrize("density", [0.1, 0.2, 0.4])
+def test_a_route_that_must_come_back_plans_for_it(density):
+    """Cura's FILL block ends where it started (its walls come next), so the route must come back.
+    The H-bracket's infill ordered with the end in view travels at least 5 % less than the same
+    ordering blind to the end and then sent home, and, with paths moved where 2-opt left them, at
+    least 15 % less than greedy + 2-opt did (measured 0.64-0.77x).  (In the G-code pass the web was
+    crossed three times, twice empty: infill travel 1.18-1.20x Cura's triangles at 10-20 %, now 0.81-0.86x.)"""
+    from unittest import mock
+
+    from shapely.geometry import Polygon
+
+    from DelaunayInfill import InfillPattern, routing
+    from DelaunayInfill.models import h_bracket_outline
+
+    part = Polygon(h_bracket_outline()).buffer(-0.8, join_style=2)
+    paths = chain_segments(clip_segments(InfillPattern.build(part, density, 0.4, seed=0).segments, part))
+    home = np.array([part.bounds[0] + 1.0, part.bounds[1] + 1.0])
+
+    def blind_and_home() -> float:
+        ordered, travel = order_paths(paths, start=home)
+        return travel + float(np.hypot(*(ordered[-1][-1] - home)))
+
+    with mock.patch.object(routing, "_OR_OPT_MOST", 0):
+        before = blind_and_home()  # greedy + 2-opt, blind to the end
+    planned, travel = order_paths(paths, start=home, end=home)
+    assert travel <= 0.95 * blind_and_home()
+    assert travel <= 0.85 * before, (travel, before)
+    key = lambda p: tuple(sorted([tuple(p[0]), tuple(p[-1])]))  # noqa: E731
+    assert sorted(map(key, planned)) == sorted(map(key, paths))

@@ -1167,7 +1167,7 @@ class _Run:
         region_list, empty, empty_parts = _split_empty_regions(region_list)
         if empty is not None:
             area = to_multipolygon(area.difference(empty))
-        my_blocks, fill_blocks, start = _host_blocks(parse.blocks, {st.name, *(c.name for c in children)})
+        my_blocks, fill_blocks, start, end = _host_blocks(parse.blocks, {st.name, *(c.name for c in children)})
         if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
             paths, used_regions = [], []
         else:
@@ -1176,14 +1176,15 @@ class _Run:
                 # Lines run to the area's edge, as Cura's own do (CuraEngine 4.13 and 5.0 end them on the
                 # inner wall's edge grown by the infill overlap: the same infill length per area); the
                 # stubs a clip leaves across a narrow stroke or in a sharp tip are left out below.
-                result = self._clip(pattern, area, start)
+                result = self._clip(pattern, area, start, end)
                 paths = self._paths(result, min_length=lw)  # (a stub under a line width prints a blob)
             with clock("density report"):
                 self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only,
                               base_name=self._base_name(st.name, density))
         reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
         with clock("Cura's lines kept"):
-            paths = self._with_cura_kept(st, children, area, paths, reach, empty, start, out, infill_walls, in_walls)
+            paths = self._with_cura_kept(st, children, area, paths, reach, empty, start, out, infill_walls, in_walls,
+                                         end)
         for part, zname in empty_parts:
             self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
         travel_part = g.part if g.part is not None else area.buffer(lw / 2)
@@ -1209,7 +1210,7 @@ class _Run:
         return zones
 
     def _with_cura_kept(self, st: _MeshStep, children: list, area, paths: list, reach: float, empty, start,
-                        out: _LayerOut, infill_walls: list = (), in_walls=None) -> list:
+                        out: _LayerOut, infill_walls: list = (), in_walls=None, end=None) -> list:
         """`paths` with Cura's lines where the new infill does not take over, all in print order.
 
         Those lines (a part not confirmed, an island too small for the pattern, Cura's infill walls)
@@ -1219,7 +1220,7 @@ class _Run:
         cura_fill = np.concatenate([own, *(c.geo.fill for c in children)])
         kept = [*kept_cura_pieces(cura_fill, area, paths, st.line_width, reach, empty), *infill_walls]
         if kept:
-            paths, _ = order_paths([*paths, *kept], start)
+            paths, _ = order_paths([*paths, *kept], start, end=end)
         out.stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))
         out.stats["layers_with_cura_infill_kept"] = 1
         return paths
@@ -1474,13 +1475,13 @@ class _Run:
         self.modifier_areas[key] = parts
         return parts
 
-    def _clip(self, pattern, area, start):
-        """`pattern.clip`, remembered: a prism's layers clip the same area from the same nozzle position."""
-        key = (id(pattern), *_shape_key(area),
-               None if start is None else (round(start[0], 2), round(start[1], 2)))
+    def _clip(self, pattern, area, start, end=None):
+        """`pattern.clip`, remembered: a prism's layers clip the same area from and to the same nozzle positions."""
+        key = (id(pattern), *_shape_key(area), *(None if at is None else (round(at[0], 2), round(at[1], 2))
+                                                 for at in (start, end)))
         hit = self.clips.get(key)
         if hit is None or hit[0] is not pattern:  # ids are reused once a pattern is freed
-            hit = (pattern, pattern.clip(area, start=start))
+            hit = (pattern, pattern.clip(area, start=start, end=end))
             if len(self.clips) >= 8:
                 self.clips.pop(next(iter(self.clips)))
             self.clips[key] = hit
@@ -1648,17 +1649,22 @@ def _digest(area) -> bytes:
     return hashlib.blake2b(b"|".join(parts), digest_size=16).digest()
 
 
-def _host_blocks(blocks: list, names: set) -> tuple[list[int], list[int], tuple | None]:
-    """A host's FILL blocks (its and its modifiers', `names`), those that may carry new paths, and where the first starts.
+def _host_blocks(blocks: list, names: set) -> tuple[list[int], list[int], tuple | None, tuple | None]:
+    """A host's FILL blocks (its and its modifiers', `names`), those that may carry new paths, where the
+    first starts and, when it is the only one, where it ends.
 
     Every FILL block of the host and its modifiers may carry new paths, travel-only ones too (Cura's
     hops between its blocks): a path printed on the way costs no travel.  Returns (indices into
-    `blocks`, the supported ones among them, the first of those's start (x, y) mm or None).
+    `blocks`, the supported ones among them, the first of those's start (x, y) mm or None, the
+    single one's end (x, y) mm or None: the route is planned to end near it; several blocks share
+    the route by `plan_runs`, which knows every block's ends).
     """
     mine = [i for i, b in enumerate(blocks) if b.has_moves and b.mesh in names]
     fill_blocks = [bi for bi in mine if not blocks[bi].unsupported] or mine[:1]
     first = blocks[fill_blocks[0]].before
-    return mine, fill_blocks, ((first.x, first.y) if math.isfinite(first.x) else None)
+    last = blocks[fill_blocks[0]].after if len(fill_blocks) == 1 else None
+    return (mine, fill_blocks, (first.x, first.y) if math.isfinite(first.x) else None,
+            (last.x, last.y) if last is not None and math.isfinite(last.x) else None)
 
 
 def _block_anchors(parse: LayerParse, fill_blocks: list[int]) -> np.ndarray | None:
@@ -1677,7 +1683,7 @@ def _island_runs(paths: list[np.ndarray], ends: np.ndarray, anchors: np.ndarray,
     """One run per FILL block when each block fills an island of its own (None: they do not).
 
     CuraEngine 5.0 writes one FILL block per island (a pillar, a letter): a block's run is then the
-    paths of its island, routed from where the block starts, and no route needs sharing
+    paths of its island, routed from where the block starts to where it ends, and no route needs sharing
     (`routing.plan_runs` costs every cut of a shared route, which grows with blocks x paths).
     Each block's Cura lines (`anchors`) must lie in a piece of `part` of its own, and every path must
     start in one of those pieces.
@@ -1705,8 +1711,8 @@ def _island_runs(paths: list[np.ndarray], ends: np.ndarray, anchors: np.ndarray,
         path_piece[contains_xy(piece, heads[:, 0], heads[:, 1])] = k
     if (block_piece < 0).any() or len(set(block_piece.tolist())) < len(ends) or not np.isin(path_piece, block_piece).all():
         return None
-    return [order_paths([paths[i] for i in np.flatnonzero(path_piece == k)], (b[0], b[1]))[0] if (path_piece == k).any()
-            else [] for k, b in zip(block_piece, ends)]
+    return [order_paths([paths[i] for i in np.flatnonzero(path_piece == k)], (b[0], b[1]), end=(b[2], b[3]))[0]
+            if (path_piece == k).any() else [] for k, b in zip(block_piece, ends)]
 
 
 def _block_rate(parse: LayerParse, moves: np.ndarray, mesh: str, fill: np.ndarray, rates: dict) -> float | None:

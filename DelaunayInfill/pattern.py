@@ -89,7 +89,7 @@ class InfillResult:
     segments : ndarray, shape (k, 2, 2)
         The same lines as segments.
     travel_mm : float
-        Straight travel between consecutive paths (from the start point when given).
+        Straight travel between consecutive paths (from the start point and to the end point when given).
     area : MultiPolygon
         The area the infill fills.
     line_width : float
@@ -485,14 +485,14 @@ class InfillPattern:
 class _Sampling:
     """One sampling of the seamless build's calibration: its pattern and how far its zones are off."""
 
-    worst: float  # the worst zone's error (fraction; small zones above target count a quarter)
+    worst: float  # the worst zone's error (fraction; in the loop small zones above target count a quarter)
     points: np.ndarray  # (n, 2) mm
     triangles: np.ndarray  # (t, 3) indices into points
     segments: np.ndarray  # (e, 2, 2) mm: the edges kept
     measured: np.ndarray  # (zones,) fractions
     iteration: int  # of the calibration loop
-    edges: np.ndarray  # (e, 2) indices into points
-    inside: np.ndarray  # (zones, e) mm of each edge inside each zone
+    edges: np.ndarray  # (e, 2) indices into points (as sampled: balancing changes `segments` only)
+    inside: np.ndarray  # (zones, e) mm of each of those edges inside each zone
     growing: object  # its GrowingDelaunay, or None
     fixed: int  # how many of the first points lie on a lattice
     factors: np.ndarray  # (zones,) the density factors it was sampled at

@@ -10,7 +10,7 @@
   closed loops come on top.  Chains are read off by pointer jumping (list
   ranking), without a Python loop over segments.
 * `order_paths` orders (and flips) chains to keep travel short: greedy
-  nearest end, then 2-opt.
+  nearest end, then 2-opt and or-opt, counting the travel to a given end.
 * `plan_runs` shares one ordered route among blocks that must start and end
   at given points (Cura's FILL blocks of a layer), cutting it where the least
   travel is added (`route_cuts`, dynamic programming); `TravelCost` prices a
@@ -298,7 +298,7 @@ def chain_segments(segments: np.ndarray) -> list[np.ndarray]:
 
 
 def order_paths(
-    paths: list[np.ndarray], start=None, *, end=None, rounds: int = 8, window: int = 24
+    paths: list[np.ndarray], start=None, *, end=None, rounds: int = 8, window: int = 64
 ) -> tuple[list[np.ndarray], float]:
     """Order and orient paths to keep travel between them short.
 
@@ -307,6 +307,8 @@ def order_paths(
     (run start x run length up to `window`) is scored at once, and the best
     non-touching moves are applied together.  Greedy order leaves mostly
     local detours; the window keeps a round linear in the number of paths.
+    Then or-opt (`_or_opt`: single paths moved into better gaps) and 2-opt
+    once more.
 
     Parameters
     ----------
@@ -326,7 +328,7 @@ def order_paths(
     -------
     (paths, travel_mm)
         Reordered (and possibly reversed) paths, and the straight-line travel
-        between consecutive paths (from `start` when given).
+        between consecutive paths (from `start` and to `end` when given).
     """
     n = len(paths)
     if n == 0:

@@ -204,7 +204,7 @@ def test_a_route_that_must_come_back_plans_for_it(density):
     The H-bracket's infill ordered with the end in view travels at least 5 % less than the same
     ordering blind to the end and then sent home, and, with paths moved where 2-opt left them, at
     least 15 % less than greedy + 2-opt did (measured 0.64-0.77x).  (In the G-code pass the web was
-    crossed three times, twice empty: infill travel 1.18-1.20x Cura's triangles at 10-20 %, now 0.81-0.86x.)"""
+    crossed three times, twice empty: infill travel 1.18-1.20x Cura's triangles at 10-20 %, now 0.72-0.86x.)"""
     from unittest import mock
 
     from shapely.geometry import Polygon

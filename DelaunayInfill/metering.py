@@ -27,7 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .density import DensityMap, ZoneRaster
-from .geometry import boundary_segments, contains_xy, to_multipolygon, unary_union
+from .geometry import boundary_segments, contains_xy, empty_area, to_multipolygon, unary_union
 from .routing import clip_segments, split_segments
 
 __all__ = ["RasterMeter", "ZoneMeter", "border_bands", "measured_density", "meter_for", "raster_meter",
@@ -526,7 +526,7 @@ def border_bands(zones: list, densities, width: float, printed=None) -> ZoneMete
     for zone, d in zip(zones, densities):
         denser = [z for z, other in zip(zones, densities) if other > d and not z.is_empty and z.area > 0]
         if zone.is_empty or zone.area <= 0 or d <= 0 or not denser:
-            bands.append(to_multipolygon(zone.difference(zone)))
+            bands.append(empty_area())
             continue
         reach = _LATTICE_SIDE * width / d
         band = to_multipolygon(zone.intersection(unary_union(denser).buffer(reach, 8)))

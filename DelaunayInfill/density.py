@@ -28,10 +28,11 @@ from scipy.spatial import cKDTree
 
 from .geometry import as_area, boundary_segments, contains_xy, to_multipolygon, unary_union
 
-__all__ = ["DensityMap", "KAPPA", "ZoneRaster", "coverage_runs", "paper_radius", "sampling_radius", "check_density",
-           "check_line_width"]
+__all__ = ["DensityMap", "KAPPA", "LATTICE_SIDE", "ZoneRaster", "coverage_runs", "paper_radius", "sampling_radius",
+           "shortest_edges", "check_density", "check_line_width"]
 
 KAPPA = 2.70  # printed density * r / w for maximal Poisson-disk Delaunay edges (measured)
+LATTICE_SIDE = 2.0 * math.sqrt(3.0)  # a triangular lattice of density d has side LATTICE_SIDE * w / d
 _BITS = 52  # polygons per coverage raster: one bit each in a float64 cell sum (exact up to 2^53)
 
 
@@ -68,6 +69,18 @@ def sampling_radius(density: np.ndarray | float, line_width: float, calibration:
     ``measured``: ``KAPPA * line_width / density``; ``paper``: Formula (6) (`paper_radius`).
     """
     return paper_radius(density, line_width) if calibration == "paper" else KAPPA * line_width / density
+
+
+def shortest_edges(segments: np.ndarray, dmap: DensityMap, width: float) -> np.ndarray:
+    """A quarter of the local spacing (the lattice side at the wanted density) per segment (k, 2, 2), mm.
+
+    Across a border the denser side's spacing (the densest of the two ends and the middle).
+    """
+    if len(segments) == 0:
+        return np.zeros(0)
+    at = np.concatenate((segments[:, 0], segments[:, 1], segments.mean(axis=1)))
+    densest = dmap.at(at).reshape(3, -1).max(axis=0)
+    return 0.25 * LATTICE_SIDE * width / densest
 
 
 @dataclass(frozen=True)

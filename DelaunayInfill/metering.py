@@ -26,7 +26,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .density import DensityMap, ZoneRaster
+from .density import LATTICE_SIDE, DensityMap, ZoneRaster
 from .geometry import boundary_segments, contains_xy, empty_area, to_multipolygon, unary_union
 from .routing import clip_segments, split_segments
 
@@ -38,7 +38,6 @@ _FEW = 48  # zone meter: up to this many pieces to cut query the edges' tree (no
 _CELL = 0.45  # several sharp-border zones: raster cell side, in line widths
 _MAX_CELLS = 120_000  # ... the cell grows beyond that when the footprint's box would need more cells
 _FEW_CELLS = 400  # ... cells wider than a line: a zone of fewer cells is measured exactly instead
-_LATTICE_SIDE = 2.0 * math.sqrt(3.0)  # a triangular lattice of density d has side 2 sqrt(3) w / d (the sparse spacing)
 
 
 def segment_length(segments: np.ndarray) -> float:
@@ -528,7 +527,7 @@ def border_bands(zones: list, densities, width: float, printed=None) -> ZoneMete
         if zone.is_empty or zone.area <= 0 or d <= 0 or not denser:
             bands.append(empty_area())
             continue
-        reach = _LATTICE_SIDE * width / d
+        reach = LATTICE_SIDE * width / d
         band = to_multipolygon(zone.intersection(unary_union(denser).buffer(reach, 8)))
         if printed is not None and band.area > 0:
             core = to_multipolygon(band.intersection(printed.buffer(-reach, 8)))

@@ -397,12 +397,12 @@ def test_density_at_sharp_borders_is_the_last_region_holding_the_point(seed):
 def test_only_coarse_zones_off_target_are_balanced_without_resampling(monkeypatch):
     """A small part whose zones hold a few dozen samples each: one sampling, then balancing, and
     the zones still end within 2.5 points of their targets (measured whole, border bands included)."""
-    from DelaunayInfill import pattern as pattern_module
+    from DelaunayInfill import seamless_layout
 
     calls = []
     for name in ("sample_poisson_disk", "sample_triangulated"):  # (the latter: the sampler's triangulation too)
-        sample = getattr(pattern_module, name)
-        monkeypatch.setattr(pattern_module, name, lambda *a, _sample=sample, **k: calls.append(1) or _sample(*a, **k))
+        sample = getattr(seamless_layout, name)
+        monkeypatch.setattr(seamless_layout, name, lambda *a, _sample=sample, **k: calls.append(1) or _sample(*a, **k))
     scale = 0.5  # a 30 mm star: its tips are under 6 x 6 radii at every density here
     small_star = Polygon(np.asarray(star().exterior.coords) * scale)
     regions = [(Polygon(np.asarray(p.exterior.coords) * scale), d) for p, d in star_regions()]

@@ -30,13 +30,22 @@ With ``--ideal`` a fourth table measures the same windows over the best junction
 have (`ideal_junction`: each density's exact lattice right up to the border, nothing between; the
 densities are then whatever the lattices print there): what any sampler could reach at most.
 
+With ``--junctions`` a fifth table puts three junctions side by side in three windows: the default
+pattern, the ideal junction and a **border line** (`border_line_junction`: each density's exact
+lattice clipped at the region's border, and one line along the border that both end on, as an infill
+mesh with an infill wall; densities uncalibrated).  Besides the two windows above, a third of the
+same size is centred on the region's lower border (**straddling**: half of it each density), given
+as C_min / rho itself (a triangular lattice measures about 0.37 in a window this size).  A window
+whose edge is the border is strained as the affine field there, so a line along that edge counts as
+fully loaded: the straddling window is the fair test of a junction.
+
 Targets (issue 15): every whole region within 2 points for regions two of their own spacings
 across and more; no node over 8 edges; no short edge; each region's C_min / rho at least 0.95 of a
 uniform pattern of its density.
 
 Usage::
 
-    python3 bench/bench_regions.py [--seeds 5] [--ideal]
+    python3 bench/bench_regions.py [--seeds 5] [--ideal] [--junctions]
     python3 bench/bench_regions.py --seeds 5 --plot border-profile.png   # the density across one border
 """
 
@@ -294,6 +303,82 @@ def format_ideal(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def _lines(segments: np.ndarray) -> MultiLineString:
+    return MultiLineString([tuple(map(tuple, s)) for s in segments])
+
+
+def _segments(lines) -> np.ndarray:
+    """Segments (k, 2, 2) of a (Multi)LineString or a collection of them."""
+    pieces = []
+    for line in getattr(lines, "geoms", [lines]):
+        if line.is_empty:
+            continue
+        if hasattr(line, "geoms"):
+            pieces.append(_segments(line))
+            continue
+        coords = np.asarray(line.coords)
+        if len(coords) >= 2:
+            pieces.append(np.stack((coords[:-1], coords[1:]), axis=1))
+    return np.concatenate(pieces) if pieces else np.zeros((0, 2, 2))
+
+
+def border_line_junction(base: float, inner: float, side: float, angle: float) -> np.ndarray:
+    """Each density's exact lattice clipped at the region's border and one line along the border (the
+    lattices' lines end on it), clipped to `STIFFNESS_PART`: segments (k, 2, 2), densities uncalibrated."""
+    from shapely.ops import unary_union
+
+    region = box(50 - side / 2, 50 - side / 2, 50 + side / 2, 50 + side / 2)
+    lattice = {d: _lines(triangular_lattice(2.0 * math.sqrt(3.0) * WIDTH / d, 110.0, angle)) for d in (base, inner)}
+    return _segments(unary_union([lattice[inner].intersection(region),
+                                  lattice[base].intersection(STIFFNESS_PART.difference(region)), region.exterior]))
+
+
+def run_junctions(angles=(0.1, 0.4, 0.7)) -> list[dict]:
+    """The default pattern (seeds 0, 1, 2), the ideal junction and the border line (three lattice turns)
+    in the windows over the region, beside it and straddling its border."""
+    rows = []
+    for name, (base, inner, side) in STIFFNESS_CASES.items():
+        region = box(50 - side / 2, 50 - side / 2, 50 + side / 2, 50 + side / 2)
+        below = box(50 - side / 2, 50 - 1.5 * side, 50 + side / 2, 50 - side / 2)
+        windows = {"over": (50.0, 50.0), "beside": (50.0, 50.0 - side), "straddling": (50.0, 50.0 - side / 2)}
+        for k, angle in enumerate(angles):
+            def lattice(d, angle=angle):
+                lines = _lines(triangular_lattice(2.0 * math.sqrt(3.0) * WIDTH / d, 110.0, angle))
+                return _segments(lines.intersection(STIFFNESS_PART))
+
+            def pattern(d, seed=k):
+                return InfillPattern.build(STIFFNESS_PART, d, WIDTH, seed=seed).clip(STIFFNESS_PART).segments
+
+            default = InfillPattern.build(STIFFNESS_PART, base, WIDTH, regions=[(region, inner)],
+                                          seed=k).clip(STIFFNESS_PART).segments
+            for junction, lines, uniform in (("default pattern", default, pattern),
+                                             ("ideal junction", ideal_junction(base, inner, side, angle), lattice),
+                                             ("border line", border_line_junction(base, inner, side, angle), lattice)):
+                got = {w: stiffness(lines, WIDTH, window=side, centre=c) for w, c in windows.items()}
+                rows.append({
+                    "case": name, "junction": junction, "turn": k,
+                    "over": got["over"].c_min / stiffness(uniform(inner), WIDTH, window=side, centre=windows["over"]).c_min,
+                    "beside": got["beside"].c_min / stiffness(uniform(base), WIDTH, window=side,
+                                                              centre=windows["beside"]).c_min,
+                    "straddling": got["straddling"].c_min,
+                    "region": density(lines, region), "below": density(lines, below),
+                })
+    return rows
+
+
+def format_junctions(rows: list[dict]) -> str:
+    out = ["| case | junction | over the region: vs uniform | beside it: vs uniform | straddling the border: C_min/rho "
+           "| region density (%) | density below it (%) |", "|---|---|---:|---:|---:|---:|---:|"]
+    for name in STIFFNESS_CASES:
+        for junction in ("default pattern", "ideal junction", "border line"):
+            mine = [r for r in rows if r["case"] == name and r["junction"] == junction]
+            cells = [f"{np.mean([r[key] for r in mine]):.3f} ({min(r[key] for r in mine):.3f})"
+                     for key in ("over", "beside", "straddling")]
+            out.append(f"| {name} | {junction} | " + " | ".join(cells) + f" | {100 * np.mean([r['region'] for r in mine]):.1f} "
+                       f"| {100 * np.mean([r['below'] for r in mine]):.1f} |")
+    return "\n".join(out)
+
+
 PROFILE_CASE = "box 20 mm at 60 % in 20 %"
 
 
@@ -348,6 +433,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=5, help="seeds per case (default 5)")
     parser.add_argument("--ideal", action="store_true",
                         help="also measure the ideal junction of two exact lattices (no band) the same way")
+    parser.add_argument("--junctions", action="store_true",
+                        help="also compare the default pattern, the ideal junction and a border line in three windows")
     parser.add_argument("--plot", metavar="PNG", help="draw the density across the border of one case, per seed, and stop")
     args = parser.parse_args(argv)
     if args.plot:
@@ -363,6 +450,9 @@ def main(argv=None) -> int:
     if args.ideal:
         print()
         print(format_ideal(run_ideal()))
+    if args.junctions:
+        print()
+        print(format_junctions(run_junctions()))
     return 0
 
 

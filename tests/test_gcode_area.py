@@ -585,3 +585,28 @@ def test_a_mesh_with_walls_inside_the_host_is_cut_out_of_its_area(box_xy):
 def test_an_infill_mesh_without_walls_leaves_the_host_area_as_it_is():
     parse, geo, inner, host_area, lw = _host_and_box(False)
     assert without_foreign(parse, geo, lw) is geo
+
+
+@pytest.mark.parametrize("strip_widths, kept", [(0.5, False), (1.5, True)])
+def test_a_strip_between_a_hole_s_wall_and_the_outline_s_is_area_only_when_a_line_fits(strip_widths, kept):
+    """A square hole near a 24 mm square's side, one wall each, no skin: the strip between the two
+    walls' lines is infill area when it is 1.5 line widths wide, and not when it is 0.5 (random shape
+    10: the pass joined a pocket to the rest through such a strip, so the pocket lost Cura's line)."""
+    lw = 0.4
+    host = box(98, 98, 122, 122)
+    inner_wall_x = 98 + 1.5 * lw  # the host's inner wall line
+    hole_x = inner_wall_x + lw + strip_widths * lw + 1.5 * lw  # the hole's edge: its inner wall 1.5 lw out
+    hole = box(hole_x, 105, hole_x + 6, 111)
+    part = host.difference(hole)
+    blocks = [("host", "WALL-OUTER", [_square_ring(*host.buffer(-lw / 2, join_style=2).bounds),
+                                      _square_ring(*hole.buffer(lw / 2, join_style=2).bounds)]),
+              ("host", "WALL-INNER", [_square_ring(*host.buffer(-1.5 * lw, join_style=2).bounds),
+                                      _square_ring(*hole.buffer(1.5 * lw, join_style=2).bounds)]),
+              ("host", "FILL", _hatch(part.buffer(-2 * lw, join_style=2), 2.0))]
+    parse = parse_layer(_layer_gcode(blocks), MachineState(), RetractionModel())
+    geo = mesh_layer(parse, "host", lw, 0.0, 2.0)
+    strip = box(inner_wall_x + lw / 2, 106, hole_x - 1.5 * lw - lw / 2, 110)
+    assert strip.area > 0
+    got = geo.area.intersection(strip).area / strip.area
+    assert (got > 0.9) if kept else (got < 0.05), got
+    assert geo.area.area > 0.9 * part.buffer(-2 * lw, join_style=2).area  # the rest is area, whole

@@ -224,6 +224,25 @@ def test_a_stub_of_new_infill_does_not_take_over_a_small_island():
     assert kept_cura_pieces(cura, big, [np.array([[1.0, 1.0], [2.0, 1.0]])], LW, reach=5.0) == []
 
 
+def test_cura_lines_in_a_finger_narrower_than_two_line_widths_stay():
+    """A 0.6 mm finger of a small piece (under reach squared) beside a hole (random shape 25): the
+    pattern crosses it only as stubs, so a new line 3 mm away does not take over Cura's stub at its
+    tip; one along it does."""
+    body = box(0, 0, 10, 10)
+    finger = box(4.7, 10, 5.3, 14)  # 0.6 mm wide, 4 mm long, on the body's top edge
+    area = body.union(finger)
+    tip = np.array([[[5.0, 12.8], [5.0, 13.7]]])  # Cura's 0.9 mm line at the finger's tip
+    across = [np.array([[0.5, 9.5], [9.5, 9.5]])]  # the pattern's nearest line: in the body, 3.3 mm away
+    kept = kept_cura_pieces(tip, area, across, LW, reach=12.0)
+    assert abs(sum(LineString(k).length for k in kept) - 0.9) < 0.05
+    # a new line along the finger takes it over
+    along = [*across, np.array([[5.0, 10.2], [5.0, 13.9]])]
+    assert kept_cura_pieces(tip, area, along, LW, reach=12.0) == []
+    # in the body (wider than two line widths) the line 3.3 mm away takes a Cura line over, as before
+    inside = np.array([[[5.0, 6.0], [5.0, 7.0]]])
+    assert kept_cura_pieces(inside, area, across, LW, reach=12.0) == []
+
+
 # ----------------------------------------------------------------------------- end to end
 def test_no_new_infill_in_a_hole_whose_wall_came_in_three_pieces():
     features, hole = _ring_layer(3)

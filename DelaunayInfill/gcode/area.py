@@ -199,6 +199,29 @@ def _opened(area, line_width: float):
     return to_multipolygon(shrunk.buffer(r, join_style=2, mitre_limit=4.0).intersection(area))
 
 
+def _without_necks(area, line_width: float):
+    """`area` cut where a strip narrower than 0.9 line widths joins two of its parts, or is all of a piece.
+
+    Walls of two loops (a hole's and the outline's) that run within two line widths of each other
+    leave such a strip between their buffers, where Cura has no infill area: through it a pocket
+    beyond would count as part of the rest (`witness`: the new infill there "takes over" Cura's
+    line in the pocket).  The opening of `_opened` is done only where it changes the pieces: a
+    piece whose core (shrunk by 0.45 line widths) is one piece keeps its outline (a finger that
+    ends in it is the witness's to judge).
+    """
+    r = 0.45 * line_width
+    shrunk = area.buffer(-r, join_style=2, mitre_limit=4.0)
+    pieces, cores = polygons_of(area), polygons_of(shrunk)
+    if len(cores) == len(pieces):
+        inside = np.array([c.representative_point().coords[0] for c in cores]).reshape(-1, 2)
+        owners = [np.flatnonzero(contains_xy(p, inside[:, 0], inside[:, 1])) for p in pieces]
+        if all(len(o) == 1 for o in owners) and len({int(o[0]) for o in owners}) == len(pieces):
+            return area
+    if shrunk.is_empty:
+        return empty_area()
+    return to_multipolygon(shrunk.buffer(r, join_style=2, mitre_limit=4.0).intersection(area))
+
+
 def skin_region(runs: list[np.ndarray], line_width: float):
     """The area skin covers: its lines grown by half a line width, the gaps between them closed.
 
@@ -458,6 +481,8 @@ def mesh_layer(
             area = to_multipolygon(inner.buffer(overlap, 4)) if overlap > 0 else to_multipolygon(inner)
     if skin_mask.any() and not area.is_empty:
         area = _opened(area.difference(skin_region(runs_of(parse, skin_mask), line_width)), line_width)
+    elif not area.is_empty:
+        area = _without_necks(area, line_width)
     pieces = polygons_of(area)
     kept = [p for p in pieces if p.area > line_width * line_width]
     if len(kept) < len(pieces):  # (slivers left between walls and skin go; else the area stays as it is)

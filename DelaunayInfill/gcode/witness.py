@@ -10,8 +10,10 @@ of its lines, and no line runs where there is no infill area.  So:
   and the skin must have cut out already (`area.py`).
 * `kept_cura_pieces` finds the stretches of Cura's lines that the new infill
   does not take over: outside the final area (a part that could not be
-  rebuilt) or with no new line near them (an island too small for the
-  pattern).  They are printed as Cura printed them.
+  rebuilt), with no new line near them (an island too small for the
+  pattern), or in a strip of a small piece narrower than two line widths
+  that no new line runs along (a finger beside a hole).  They are printed as Cura
+  printed them.
 """
 
 from __future__ import annotations
@@ -278,6 +280,7 @@ def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width
     if len(rest):
         member[rest[distances(points_of(points[rest]), area) <= line_width]] = True
     decided = np.zeros(len(points), dtype=bool)
+    new_tree = kd_tree(new) if len(new) else None
     for piece in polygons_of(area):
         if piece.area > reach * reach:
             continue
@@ -294,11 +297,31 @@ def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width
         if len(theirs) < max(0.5 * np.count_nonzero(mine), 4):  # (4 points: two line widths of new line)
             continue
         rows = np.flatnonzero(mine)
-        out[rows[kd_tree(theirs).query(points[rows], distance_upper_bound=reach)[0] <= reach]] = False
+        taken = kd_tree(theirs).query(points[rows], distance_upper_bound=reach)[0]
+        # A place in a strip of the piece under two line widths (a finger beside a hole) with no new
+        # line within a line width stays Cura's: the pattern crosses such a strip only as stubs.
+        finger = taken > line_width
+        if finger.any():
+            core = piece.buffer(-line_width, join_style=2, mitre_limit=4.0)
+            finger[finger] = ~_near_area(core, points[rows[finger]], 1.25 * line_width)
+        out[rows[(taken <= reach) & ~finger]] = False
     rows = np.flatnonzero(member & ~decided)
-    if len(rows) and len(new):
-        out[rows[_near(kd_tree(new), points, rows, reach, groups)]] = False
+    if len(rows) and new_tree is not None:
+        out[rows[_near(new_tree, points, rows, reach, groups)]] = False
     return out
+
+
+def _near_area(area, points: np.ndarray, tolerance: float) -> np.ndarray:
+    """Whether each point (p, 2) lies in `area` or within about `tolerance` (mm) of it, shape (p,)."""
+    if area.is_empty:
+        return np.zeros(len(points), dtype=bool)
+    near = contains_xy(area, points[:, 0], points[:, 1])
+    rest = np.flatnonzero(~near)
+    if len(rest):
+        # (the boundary sampled every quarter of the tolerance: a point is within an eighth of it of the line)
+        edge = sample_segments(boundary_segments(area), tolerance / 4)
+        near[rest] = kd_tree(edge).query(points[rest], distance_upper_bound=tolerance)[0] <= tolerance
+    return near
 
 
 def _near(tree, points: np.ndarray, rows: np.ndarray, reach: float, groups: tuple | None) -> np.ndarray:

@@ -694,16 +694,18 @@ class EverydaySliceCache:
 # --------------------------------------------------------------------------- command line
 
 
-def render(out_dir: str, columns: int = 6) -> str:
-    """Draw every model of :data:`MODELS` but the modifier box (matplotlib 3-D) into
-    ``out_dir/everyday-models.png``."""
+def render(out_dir: str, columns: int = 6, names: Sequence[str] | None = None,
+           file_name: str = "everyday-models.png") -> str:
+    """Draw the models `names` (default: the corpus's, the modifier box left out) of :data:`MODELS`
+    (matplotlib 3-D) into ``out_dir/file_name``."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    names = [name for name in MODELS if name != "modifier_box"]
+    if names is None:
+        names = [name for name in MODELS if name != "modifier_box" and not name.startswith("random_")]
     rows = math.ceil(len(names) / columns)
     figure = plt.figure(figsize=(3.0 * columns, 3.0 * rows))
     elevation, azimuth = np.radians(28.0), np.radians(-60.0)
@@ -731,7 +733,7 @@ def render(out_dir: str, columns: int = 6) -> str:
         axes.set_title(name, fontsize=10)
     figure.tight_layout()
     os.makedirs(out_dir, exist_ok=True)
-    path = os.path.join(out_dir, "everyday-models.png")
+    path = os.path.join(out_dir, file_name)
     figure.savefig(path, dpi=90)
     plt.close(figure)
     return path

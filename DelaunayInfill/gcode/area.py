@@ -193,10 +193,14 @@ def _opened(area, line_width: float):
     A mitred opening keeps the area's corners.
     """
     r = 0.45 * line_width
-    shrunk = area.buffer(-r, join_style=2, mitre_limit=4.0)
+    return _grown_back(area, area.buffer(-r, join_style=2, mitre_limit=4.0), r)
+
+
+def _grown_back(area, shrunk, radius: float):
+    """`shrunk` (`area` shrunk by `radius`, mitred) grown back inside `area`: the opening's second half."""
     if shrunk.is_empty:
         return empty_area()
-    return to_multipolygon(shrunk.buffer(r, join_style=2, mitre_limit=4.0).intersection(area))
+    return to_multipolygon(shrunk.buffer(radius, join_style=2, mitre_limit=4.0).intersection(area))
 
 
 def _without_necks(area, line_width: float):
@@ -217,9 +221,7 @@ def _without_necks(area, line_width: float):
         owners = [np.flatnonzero(contains_xy(p, inside[:, 0], inside[:, 1])) for p in pieces]
         if all(len(o) == 1 for o in owners) and len({int(o[0]) for o in owners}) == len(pieces):
             return area
-    if shrunk.is_empty:
-        return empty_area()
-    return to_multipolygon(shrunk.buffer(r, join_style=2, mitre_limit=4.0).intersection(area))
+    return _grown_back(area, shrunk, r)
 
 
 def skin_region(runs: list[np.ndarray], line_width: float):

@@ -12,8 +12,8 @@ of its lines, and no line runs where there is no infill area.  So:
   does not take over: outside the final area (a part that could not be
   rebuilt), with no new line near them (an island too small for the
   pattern), or in a strip of a small piece narrower than two line widths
-  that no new line runs along (a finger beside a hole).  They are printed as Cura
-  printed them.
+  that no new line runs along (a finger beside a hole).  They are printed
+  as Cura printed them.
 """
 
 from __future__ import annotations
@@ -280,7 +280,6 @@ def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width
     if len(rest):
         member[rest[distances(points_of(points[rest]), area) <= line_width]] = True
     decided = np.zeros(len(points), dtype=bool)
-    new_tree = kd_tree(new) if len(new) else None
     for piece in polygons_of(area):
         if piece.area > reach * reach:
             continue
@@ -306,8 +305,8 @@ def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width
             finger[finger] = ~_near_area(core, points[rows[finger]], 1.25 * line_width)
         out[rows[(taken <= reach) & ~finger]] = False
     rows = np.flatnonzero(member & ~decided)
-    if len(rows) and new_tree is not None:
-        out[rows[_near(new_tree, points, rows, reach, groups)]] = False
+    if len(rows) and len(new):
+        out[rows[_near(kd_tree(new), points, rows, reach, groups)]] = False
     return out
 
 

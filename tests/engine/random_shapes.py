@@ -86,7 +86,7 @@ def random_model(seed: int) -> Manifold:
         tube = Manifold.cylinder(4 * max(hx, hy), d / 2, d / 2, 32).rotate((90.0, 0.0, 0.0))
         solid = solid - tube.translate((float(spot()[0]), 2 * max(hx, hy), z)).rotate((0.0, 0.0, float(rng.uniform(0, 180))))
     if rng.random() < 0.3:  # a closed cavity
-        r = float(rng.uniform(2, min(6.0, height / 3)))
+        r = float(rng.uniform(2, max(2.0, min(6.0, height / 3))))  # (a low body: a 2 mm cavity)
         x, y = spot() * 0.5
         solid = solid - Manifold.sphere(r, SEGMENTS).translate((x, y, height / 2))
     if rng.random() < 0.4:  # a slope cut off one side: keep n . p <= c, n tilted by `tilt` from vertical

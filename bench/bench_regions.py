@@ -60,6 +60,7 @@ import time
 import numpy as np
 from shapely.geometry import MultiLineString, Point, box
 
+from DelaunayInfill.density import LATTICE_SIDE
 from DelaunayInfill.figures import star_polygon, star_regions
 from DelaunayInfill.pattern import InfillPattern
 
@@ -96,7 +97,7 @@ def sparse_side(part, base: float, region, region_density: float):
 def border_bands(part, base: float, region, region_density: float) -> dict:
     """Bands one sparse spacing wide along the region's border, inside the part shrunk by one spacing
     (the part's own edge stays out of them): {"sparse 1-2", "sparse 0-1", "dense 0-1", "dense beyond 1"}."""
-    s = 2.0 * math.sqrt(3.0) * WIDTH / min(base, region_density)
+    s = LATTICE_SIDE * WIDTH / min(base, region_density)
     inner = part.buffer(-s)
     if region_density > base:  # dense inside the region: the sparse side is outside it
         sparse_near, sparse_far = region.buffer(s).difference(region), region.buffer(2 * s).difference(region.buffer(s))
@@ -117,7 +118,7 @@ def node_figures(pattern) -> tuple[int, int]:
     both = inside[index.reshape(-1, 2)].all(axis=1)
     dens = np.maximum(pattern.density_map.at(segments[:, 0]), pattern.density_map.at(segments[:, 1]))
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
-    short = both & (length < 0.25 * 2.0 * math.sqrt(3.0) * WIDTH / dens)
+    short = both & (length < 0.25 * LATTICE_SIDE * WIDTH / dens)
     return int(counts[inside].max()), int(short.sum())
 
 
@@ -269,7 +270,7 @@ def ideal_junction(base: float, inner: float, side: float, angle: float) -> np.n
     region = box(50 - side / 2, 50 - side / 2, 50 + side / 2, 50 + side / 2)
     points = []
     for density, inside in ((inner, True), (base, False)):
-        lattice = triangular_lattice(2.0 * math.sqrt(3.0) * WIDTH / density, 110.0, angle)
+        lattice = triangular_lattice(LATTICE_SIDE * WIDTH / density, 110.0, angle)
         nodes = np.unique(np.round(lattice.reshape(-1, 2), 7), axis=0)
         nodes = nodes[(np.abs(nodes - 50.0) <= 50.0).all(axis=1)]
         points.append(nodes[contains_xy(region, nodes[:, 0], nodes[:, 1]) == inside])
@@ -285,7 +286,7 @@ def run_ideal(angles=(0.1, 0.4, 0.7)) -> list[dict]:
     for name, (base, inner, side) in STIFFNESS_CASES.items():
         for angle in angles:
             lines = ideal_junction(base, inner, side, angle)
-            uniform = triangular_lattice(2.0 * math.sqrt(3.0) * WIDTH / inner, 110.0, angle)
+            uniform = triangular_lattice(LATTICE_SIDE * WIDTH / inner, 110.0, angle)
             over = stiffness(lines, WIDTH, window=side, centre=(50.0, 50.0))
             rows.append({"case": name, "seed": angle, "rho": over.rho, "region": over.c_min / stiffness(
                 uniform, WIDTH, window=side, centre=(50.0, 50.0)).c_min, "beside": float("nan")})
@@ -328,7 +329,7 @@ def border_line_junction(base: float, inner: float, side: float, angle: float) -
     from shapely.ops import unary_union
 
     region = box(50 - side / 2, 50 - side / 2, 50 + side / 2, 50 + side / 2)
-    lattice = {d: _lines(triangular_lattice(2.0 * math.sqrt(3.0) * WIDTH / d, 110.0, angle)) for d in (base, inner)}
+    lattice = {d: _lines(triangular_lattice(LATTICE_SIDE * WIDTH / d, 110.0, angle)) for d in (base, inner)}
     return _segments(unary_union([lattice[inner].intersection(region),
                                   lattice[base].intersection(STIFFNESS_PART.difference(region)), region.exterior]))
 
@@ -343,7 +344,7 @@ def run_junctions(angles=(0.1, 0.4, 0.7)) -> list[dict]:
         windows = {"over": (50.0, 50.0), "beside": (50.0, 50.0 - side), "straddling": (50.0, 50.0 - side / 2)}
         for k, angle in enumerate(angles):
             def lattice(d, angle=angle):
-                lines = _lines(triangular_lattice(2.0 * math.sqrt(3.0) * WIDTH / d, 110.0, angle))
+                lines = _lines(triangular_lattice(LATTICE_SIDE * WIDTH / d, 110.0, angle))
                 return _segments(lines.intersection(STIFFNESS_PART))
 
             def pattern(d, seed=k):
@@ -389,7 +390,7 @@ def border_profile(seeds: int, bins: int = 6) -> tuple[np.ndarray, list[np.ndarr
     """
     part, base, regions = CASES[PROFILE_CASE]
     region, region_density = regions[0]
-    s = 2.0 * math.sqrt(3.0) * WIDTH / min(base, region_density)
+    s = LATTICE_SIDE * WIDTH / min(base, region_density)
     inner = part.buffer(-s)
     edges = 0.5 * s * np.arange(-bins, bins + 1)  # signed distance: outside the region (sparse) negative
     centres = 0.5 * (edges[:-1] + edges[1:]) / s

@@ -398,7 +398,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--density", type=_percent, metavar="PCT", help="base infill density in %% (default: Cura's)")
     p.add_argument("--line-width", type=_positive, metavar="MM", help="infill line width (default: from the walls)")
     p.add_argument("--modifier", action="append", default=[], metavar="FILE.stl:PCT",
-                   help="a density region from an STL (G-code coordinates, see --modifier-offset); repeatable")
+                   help="a density region from an STL (G-code coordinates, see --modifier-offset); repeatable; "
+                   "PCT 0: no infill there (a Cura 0 %% infill mesh leaves no trace in the G-code: give it so)")
     p.add_argument("--modifier-offset", type=_offset, metavar="X,Y[,Z]",
                    help="shift modifier STLs into G-code coordinates (e.g. 110,110 for a model that CuraEngine "
                    "centred on a 220 mm bed; Z: a raft's lift, raft thickness + air gap - layer 0 Z overlap)")

@@ -72,11 +72,18 @@ def _split_pieces(polygon: Polygon, line: LineString) -> list[Polygon]:
 
 
 def _open_holes(polygon: Polygon) -> list[Polygon]:
-    """Cut a polygon with holes along a horizontal line through its first hole."""
+    """Cut a polygon with holes along a horizontal line through its first hole (else a vertical one).
+
+    A hole that neither line opens (a sliver where two borders almost meet, so close to the outline
+    that a cut leaves only a crumb beside it) is filled when it is at most 0.01 mm².
+    """
     hole = Polygon(polygon.interiors[0])
-    y = hole.representative_point().y
-    x0, _, x1, _ = polygon.bounds
-    pieces = _split_pieces(polygon, LineString([(x0 - 1.0, y), (x1 + 1.0, y)]))
+    x, y = hole.representative_point().coords[0]
+    x0, y0, x1, y1 = polygon.bounds
+    pieces = (_split_pieces(polygon, LineString([(x0 - 1.0, y), (x1 + 1.0, y)]))
+              or _split_pieces(polygon, LineString([(x, y0 - 1.0), (x, y1 + 1.0)])))
+    if not pieces and hole.area <= _SLIVER_MM2:
+        return [Polygon(polygon.exterior, polygon.interiors[1:])]
     if not pieces:
         raise ValueError("could not open a hole of the region for convex decomposition")
     return pieces

@@ -56,6 +56,7 @@ from DelaunayInfill.geometry import (
     distances,
     multilinestring_of,
     points_on_surface,
+    polygons_of,
     polygonize_segments,
 )
 
@@ -610,3 +611,58 @@ def test_a_strip_between_a_hole_s_wall_and_the_outline_s_is_area_only_when_a_lin
     got = geo.area.intersection(strip).area / strip.area
     assert (got > 0.9) if kept else (got < 0.05), got
     assert geo.area.area > 0.9 * part.buffer(-2 * lw, join_style=2).area  # the rest is area, whole
+
+
+#: random shape 111, layer 53 (CuraEngine 4.13, 4 walls, 0.4 mm lines): the rebuilt area where a pocket
+#: between two holes' inner walls meets the rest through a neck 0.15 mm wide (rounded to 0.001 mm)
+POCKET_BEHIND_A_NECK = (
+    "POLYGON ((111.409 110.370, 111.409 110.330, 111.505 109.367, 111.540 109.014, 111.794 108.399, "
+    "111.809 108.363, 112.266 107.505, 112.288 107.472, 112.477 107.243, 112.484 107.229, 112.486 107.213, "
+    "112.480 107.198, 112.470 107.186, 112.455 107.179, 112.155 107.107, 111.292 106.900, 111.277 106.899, "
+    "111.263 106.904, 111.252 106.913, 111.245 106.926, 111.243 106.937, 111.254 106.976, 111.411 107.505, "
+    "111.418 107.542, 111.474 108.092, 111.474 108.132, 111.418 108.682, 111.388 108.986, 111.398 108.988, "
+    "111.239 109.286, 110.975 109.778, 110.953 109.811, 110.601 110.236, 110.600 110.237, 110.600 110.500, "
+    "111.422 110.500, 111.409 110.370))"
+)
+
+
+def test_a_neck_between_two_sharp_tips_is_cut_where_their_grown_back_spikes_meet():
+    """The opening's mitred growth of two sharp cores reached across the 0.15 mm neck between them and
+    joined the pocket to the rest again (random shape 111: the pocket's Cura line was dropped, 'taken
+    over' by new infill 10 mm away).  The neck goes; each side keeps its own area."""
+    from shapely import wkt
+
+    from DelaunayInfill.gcode.area import _opened, _without_necks
+
+    area = wkt.loads(POCKET_BEHIND_A_NECK)
+    for opened in (_without_necks(area, 0.4), _opened(area, 0.4)):
+        pieces = sorted(polygons_of(opened), key=lambda p: p.centroid.y)
+        assert len(pieces) == 2, [p.area for p in pieces]
+        pocket, rest = pieces
+        assert pocket.area > 1.0 and rest.area > 0.6  # both sides kept, nearly whole
+        assert pocket.bounds[3] < 109.1 < rest.bounds[1] + 0.2
+        assert area.area - pocket.area - rest.area < 0.1
+
+
+def test_a_wall_less_modifier_loses_half_a_line_width_along_the_area_s_border_only():
+    """CuraEngine 4.13 insets a wall-less infill mesh's part of the host's infill area by half a line
+    width: the rim along the area's border inside the modifier goes; the host's part and the border
+    between host and modifier stay."""
+    from DelaunayInfill.gcode.area import without_modifier_rims
+
+    lw = 0.4
+    area = MultiPolygon([box(0, 0, 20, 10)])
+    got = without_modifier_rims(area, [box(10, -5, 30, 15)], lw)
+    inside = contains_xy(got, np.array([15.0, 15.0, 19.9, 5.0, 10.05, 12.0]), np.array([0.1, 0.3, 5.0, 0.1, 5.0, 9.9]))
+    assert inside.tolist() == [False, True, False, True, True, False]
+    assert got.area == pytest.approx(200 - (10 + 10 + 10 - 0.2 * 2) * lw / 2, abs=0.05)
+    assert without_modifier_rims(area, [box(30, 0, 40, 10)], lw) is area  # no overlap: as it was
+
+
+def test_the_header_tells_curaengine_s_version():
+    from DelaunayInfill.gcode.read import read_header
+
+    assert read_header(";FLAVOR:Marlin\n;Generated with Cura_SteamEngine 4.13.1\n").engine_version == (4, 13)
+    assert read_header(";FLAVOR:Griffin\n;GENERATOR.NAME:Cura_SteamEngine\n;GENERATOR.VERSION:5.7.2\n"
+                       ).engine_version == (5, 7)
+    assert read_header(";FLAVOR:Marlin\n;Generated with Cura_SteamEngine master\n").engine_version is None

@@ -58,18 +58,24 @@ def star_done(star):
     return out, report
 
 
-def fill_runs(layers, layer_number):
-    """New FILL extrusion polylines of one layer, each shape (m, 2)."""
-    from DelaunayInfill.gcode.area import runs_of
-
+def layer_parse(layers, layer_number):
+    """The parse of one layer of a chunk list."""
     state, r = MachineState(), RetractionModel()
     for chunk in iter_chunks(layers):
         parse = parse_layer(chunk, state, r)
         if parse.number == layer_number:
-            m = parse.moves
-            fill = (m["kind"] == FILL) & (m["de"] > 0) & ((m["x1"] != m["x0"]) | (m["y1"] != m["y0"]))
-            return runs_of(parse, fill)
+            return parse
     raise AssertionError(f"no layer {layer_number}")
+
+
+def fill_runs(layers, layer_number):
+    """New FILL extrusion polylines of one layer, each shape (m, 2)."""
+    from DelaunayInfill.gcode.area import runs_of
+
+    parse = layer_parse(layers, layer_number)
+    m = parse.moves
+    fill = (m["kind"] == FILL) & (m["de"] > 0) & ((m["x1"] != m["x0"]) | (m["y1"] != m["y0"]))
+    return runs_of(parse, fill)
 
 
 def test_star_is_processed_and_passes_every_check(star, star_done):
@@ -720,3 +726,37 @@ def test_infill_as_support_keeps_cura_s_infill_and_says_so(star):
     assert any("Infill as Support" in w for w in report.warnings), report.warnings
     _, report = process_gcode(star, ProcessSettings(infill_support=False))
     assert report.layers_processed > 0 and not any("Infill as Support" in w for w in report.warnings)
+
+
+def _walls(layers, layer_number):
+    """Wall segments (outer and inner) of one layer, shape (k, 2, 2) mm."""
+    from DelaunayInfill.gcode.read import WALL_INNER
+
+    m = layer_parse(layers, layer_number).moves
+    wall = np.isin(m["kind"], [WALL_OUTER, WALL_INNER]) & (m["de"] > 0)
+    return np.stack([np.column_stack([m["x0"], m["y0"]]), np.column_stack([m["x1"], m["y1"]])], axis=1)[wall]
+
+
+def _nearest_wall(points: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """Distance from each point (p, 2) to the nearest wall segment (k, 2, 2), mm."""
+    a, d = walls[None, :, 0], walls[None, :, 1] - walls[None, :, 0]
+    t = np.clip(((points[:, None] - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-12), 0, 1)
+    return np.hypot(*(points[:, None] - a - t[..., None] * d).transpose(2, 0, 1)).min(axis=1)
+
+
+def test_a_wall_less_modifier_s_lines_end_half_a_line_width_further_in_with_curaengine_4(bracket):
+    """CuraEngine 4.13 ends a wall-less infill mesh's lines half a line width further from the walls than
+    its host's (its part of the host's area is inset by half an inner wall); CuraEngine 5 does not.
+    The H-bracket's 60 % box (x > 110): the new infill's ends there as near the walls as the engine's."""
+    five = [chunk.replace("Cura_SteamEngine 4.13.0", "Cura_SteamEngine 5.0.0") for chunk in bracket[:2]] + bracket[2:]
+    assert five[:2] != bracket[:2]
+    nearest = {}
+    for name, layers in (("4.13", bracket), ("5.0", five)):
+        out, _ = process_gcode(layers, ProcessSettings(seed=2))
+        ends = np.array([p for layer in (20, 30) for run in fill_runs(out, layer) for p in (run[0], run[-1])
+                         if p[0] > 111.0])
+        walls = np.concatenate([_walls(bracket, layer) for layer in (20, 30)])
+        nearest[name] = float(_nearest_wall(ends, walls).min())
+    lw, overlap = 0.4, 0.04  # the bracket's line width and infill overlap (10 % of the two half widths)
+    assert nearest["5.0"] == pytest.approx(lw / 2 + lw / 2 - overlap - lw / 2, abs=0.03)
+    assert nearest["4.13"] == pytest.approx(nearest["5.0"] + lw / 2, abs=0.03), nearest

@@ -40,6 +40,7 @@ from .area import (
     sample_segments,
     segments_of,
     without_foreign,
+    without_modifier_rims,
 )
 from .emit import EmitParams, emit_block
 from .estimate import move_seconds, move_times
@@ -465,9 +466,10 @@ class _MeshStep:
 class _LayerRegions:
     """A host's density regions in one layer, as the pattern takes them."""
 
-    regions: list  # (area, density fraction, name), later ones win: the user's, then the modifiers' parts
+    regions: list  # (area, density fraction, name), later ones win: the modifiers' parts, then the user's
     covered_children: set  # modifiers whose area the host's seamless pattern fills
     split_parts_only: bool  # the regions are only the modifier split's parts (disjoint, inside the area)
+    rimmed: list = field(default_factory=list)  # areas of wall-less infill meshes whose infill Cura insets
 
 
 @dataclass
@@ -512,6 +514,8 @@ class _Run:
         self.s = settings
         self.user_regions = list(regions)
         self.info = info
+        # CuraEngine 4 opens infill areas and insets wall-less modifiers by half a line width; 5 does neither
+        self.cura4 = info.engine_version is None or info.engine_version < (5, 0)
         self.survey = survey
         self.state = MachineState()
         self.retraction = RetractionModel()
@@ -1070,7 +1074,8 @@ class _Run:
             if not steps[name].geo.has_walls:  # a mesh of its own without walls: its area is its FILL hull
                 st = steps[name]
                 with clock("areas"):
-                    st.geo = mesh_layer(parse, name, st.line_width, st.overlap, st.closing, self.area_cache)
+                    st.geo = mesh_layer(parse, name, st.line_width, st.overlap, st.closing, self.area_cache,
+                                        cura4_opening=self.cura4)
         out = _LayerOut(retraction=self._retraction())
         for name in hosts:
             children = [steps[c] for c, p in parent_of.items() if p == name]
@@ -1110,7 +1115,8 @@ class _Run:
                     facts.reach_density = guess  # only sets a closing radius: the first estimate will do
                 guess = guess or 0.2
             closing = min(25.0, max(2 * lw, 1.5 * lw / max(guess, 0.04)))
-            geo = mesh_layer(parse, name, lw, overlap, closing, self.area_cache, hull_without_walls=False)
+            geo = mesh_layer(parse, name, lw, overlap, closing, self.area_cache, hull_without_walls=False,
+                             cura4_opening=self.cura4)
             steps[name] = _MeshStep(name, geo, lw, overlap, closing)
         return steps
 
@@ -1167,6 +1173,11 @@ class _Run:
         region_list, empty, empty_parts = _split_empty_regions(region_list)
         if empty is not None:
             area = to_multipolygon(area.difference(empty))
+        if zones.rimmed and not area.is_empty:  # (after the 0 % cut: a modifier's lines stop short of it too)
+            with clock("areas"):
+                area = without_modifier_rims(area, zones.rimmed, lw)
+                if split_parts_only:  # (the split's parts are taken as parts of the area: cut them too)
+                    region_list = [(to_multipolygon(a.intersection(area)), d, name) for a, d, name in region_list]
         my_blocks, fill_blocks, start, end = _host_blocks(parse.blocks, {st.name, *(c.name for c in children)})
         if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
             paths, used_regions = [], []
@@ -1191,12 +1202,16 @@ class _Run:
         return _HostInfill(st, my_blocks, fill_blocks, paths, reach, empty, zones.covered_children, travel_part)
 
     def _layer_regions(self, parse: LayerParse, st: _MeshStep, children: list) -> _LayerRegions:
-        """The density regions of a host in this layer: the user's at its slice height, then its modifiers' parts."""
-        regions = [(a, r.density, r.name or f"region {k + 1}") for k, r in enumerate(self.user_regions)
-                   for a in [r.at(self._slice_z(parse.z))] if not a.is_empty]
+        """The density regions of a host in this layer: its modifiers' parts, then the user's at its slice height.
+
+        The user's win where they overlap (a modifier's part is read off its lines, and the split gives
+        a 0 % modifier's empty place to its neighbour: the command line's ``--modifier FILE.stl:0`` must
+        hold there).
+        """
+        given = [(a, r.density, r.name or f"region {k + 1}") for k, r in enumerate(self.user_regions)
+                 for a in [r.at(self._slice_z(parse.z))] if not a.is_empty]
         # Without user regions here, the regions are the modifier split's parts: disjoint, inside the area.
-        zones = _LayerRegions(regions, set(), split_parts_only=not regions)
-        given = {r[2] for r in regions}
+        zones = _LayerRegions([], set(), split_parts_only=not given)
         # (the modifiers' parts are pieces of the host's area: `_modifier_areas` splits it)
         with self.clock("areas"):
             parts = self._modifier_areas(st, children) if children else []
@@ -1204,9 +1219,14 @@ class _Run:
             if ca.is_empty:
                 continue
             zones.covered_children.add(c.name)
-            if c.name in given or c.name.replace("\\", "/").rsplit("/", 1)[-1] in given:
+            mine = [a for a, _, name in given if name in (c.name, c.name.replace("\\", "/").rsplit("/", 1)[-1])]
+            if self.cura4 and not c.geo.has_walls:
+                zones.rimmed.extend(mine or [ca])
+            if mine:
                 continue  # the caller gave this modifier's exact mesh as a Region: keep that one only
-            regions.append((ca, self._region_mesh_density(c.name, c.geo.fill, c.line_width, ca), f"mesh {c.name}"))
+            zones.regions.append((ca, self._region_mesh_density(c.name, c.geo.fill, c.line_width, ca),
+                                  f"mesh {c.name}"))
+        zones.regions.extend(given)
         return zones
 
     def _with_cura_kept(self, st: _MeshStep, children: list, area, paths: list, reach: float, empty, start,
@@ -1633,8 +1653,8 @@ class _Run:
         names = ["base", *[n for n in self.tally if n != "base"]]
         for name in names:
             t = self.tally.get(name)
-            if t is None or (name == "base" and t.area <= 1e-6 and len(self.tally) > 1):
-                continue  # regions tile the whole part: no base zone to report
+            if t is None or ((name == "base" or name.startswith("mesh ")) and t.area <= 1e-6 and len(self.tally) > 1):
+                continue  # regions tile the whole part (or the mesh, given as a region too): no zone of its own
             measured = t.length / t.area if t.area > 1e-9 else float("nan")
             target = t.target_area / t.area if t.mixed and t.area > 1e-9 else t.target
             r.regions.append(RegionReport(name, target, measured, t.area, t.layers))

@@ -222,6 +222,7 @@ class HeaderInfo:
     volumetric: bool = False
     layer_height: float | None = None
     generator: str = ""
+    engine_version: tuple[int, int] | None = None  # CuraEngine's (major, minor), when the header says
     processed: bool = False
 
 
@@ -239,6 +240,11 @@ def read_header(text: str) -> HeaderInfo:
     m = re.search(r"^;(?:Generated with|GENERATOR\.NAME:)\s*(.*)$", text, re.M)
     if m:
         info.generator = m.group(1).strip()
+    # "Cura_SteamEngine 4.13.1"; UltiGCode/Griffin headers give the version on a line of its own
+    m = re.search(r"^;(?:Generated with Cura_SteamEngine|Generated with CuraEngine|GENERATOR\.VERSION:)\s*(\d+)\.(\d+)",
+                  text, re.M)
+    if m:
+        info.engine_version = (int(m.group(1)), int(m.group(2)))
     info.processed = MARKER in text
     return info
 

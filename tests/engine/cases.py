@@ -67,8 +67,9 @@ class Case:
     def regions(self, bed_offset=(110.0, 110.0)) -> list[DensityRegion]:
         from shapely.affinity import translate
 
+        # (the matrix is sliced by CuraEngine 4.13, its modifiers wall-less infill meshes)
         return [
-            DensityRegion(m.name, translate(m.outline_polygon(), *bed_offset), m.density_region)
+            DensityRegion(m.name, translate(m.outline_polygon(), *bed_offset), m.density_region, cura4_inset=True)
             for m in self.models if m.density_region is not None
         ]
 

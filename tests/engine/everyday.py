@@ -649,8 +649,10 @@ def slice_everyday(case: EverydayCase, density: float, version: str,
     resolved = curaengine.resolve_settings(settings, meshes, resources=chosen.resources)
     line_width = float({**resolved.global_values, **resolved.extruder_values}["infill_line_width"])
     reference = reference_settings(settings, line_width)
-    # an infill or cutting mesh's infill is dense lines in the reference too
-    reference_meshes = [(name, reference_settings(values, line_width)
+    # an infill or cutting mesh's infill is dense lines in the reference too; a 0 % one's stays none (its
+    # own line distance 0: the reference's global one would reach it)
+    reference_meshes = [(name, (reference_settings(values, line_width) if values.get("infill_sparse_density", 1) != 0
+                                else {**values, "infill_line_distance": 0.0})
                          if values.get("infill_mesh") or values.get("cutting_mesh") else values)
                         for name, values in meshes]
 

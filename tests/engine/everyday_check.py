@@ -677,6 +677,34 @@ def _same_segments(segments: np.ndarray, cura: np.ndarray) -> np.ndarray:
     return np.isin(_segment_keys(segments), _segment_keys(cura))
 
 
+#: a piece of one of Cura's segments: both its ends this close to that segment (mm; G-code has 3 decimals)
+ON_CURA_TOLERANCE = 0.002
+
+
+def _on_cura_segments(segments: np.ndarray, cura: np.ndarray, flagged: np.ndarray) -> np.ndarray:
+    """Which of `segments` (k, 2, 2) lie on one of Cura's own (m, 2, 2): the whole of one, or a piece of
+    it (the pass keeps the stretch of a Cura line that its new infill does not take over).  Only the
+    `flagged` ones (bool (k,)) are looked at, each against every Cura segment: bool (k,)."""
+    on = np.zeros(len(segments), dtype=bool)
+    rows = np.flatnonzero(flagged)
+    if not len(rows) or not len(cura):
+        return on
+    on[rows] = _same_segments(segments[rows], cura)
+    rows = rows[~on[rows]]
+    a, d = cura[:, 0], cura[:, 1] - cura[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    unit = d / np.maximum(length, 1e-12)[:, None]
+    for start in range(0, len(rows), 64):  # (a few segments are flagged: 64 x m at a time)
+        chunk = rows[start:start + 64]
+        ends = segments[chunk]  # (c, 2, 2)
+        rel = ends[:, None, :, :] - a[None, :, None, :]  # (c, m, 2 ends, 2)
+        along = (rel * unit[None, :, None, :]).sum(-1)
+        across = np.abs(rel[..., 0] * unit[None, :, None, 1] - rel[..., 1] * unit[None, :, None, 0])
+        fits = (across <= ON_CURA_TOLERANCE) & (along >= -ON_CURA_TOLERANCE) & (along <= length[None, :, None] + ON_CURA_TOLERANCE)
+        on[chunk] = fits.all(axis=2).any(axis=1)
+    return on
+
+
 def _without_stubs(segments: np.ndarray, min_length: float) -> np.ndarray:
     """`segments` (k, 2, 2) less its runs (segments each starting where the one before ends) shorter
     than `min_length` (mm)."""
@@ -711,7 +739,9 @@ def _check_layer(key: tuple[int, int], z: float, layer_height: float, original: 
     # reference slice's own single lines of combined infill layers need not agree with them)
     outside = ~_inside(allowed, new_points)
     if len(original_fill) and outside.any():
-        outside &= ~np.repeat(_same_segments(new_fill, original_fill), _samples_per_segment(new_fill, step))
+        per_segment = _samples_per_segment(new_fill, step)
+        flagged = np.add.reduceat(outside, np.r_[0, np.cumsum(per_segment)[:-1]]) > 0
+        outside &= ~np.repeat(_on_cura_segments(new_fill, original_fill, flagged), per_segment)
     outside_mm = float(new_weights[outside].sum())
 
     # 3 skin: Cura's skin lines that are not infill area; such points are outside `allowed` already
@@ -729,7 +759,9 @@ def _check_layer(key: tuple[int, int], z: float, layer_height: float, original: 
         on_walls = lines_buffer(original_walls, ON_WALL_RADIUS_WIDTHS * line_width)
         new_on_wall = _inside(on_walls, new_points)
         if len(original_fill) and new_on_wall.any():
-            new_on_wall &= ~np.repeat(_same_segments(new_fill, original_fill), _samples_per_segment(new_fill, step))
+            per_segment = _samples_per_segment(new_fill, step)
+            flagged = np.add.reduceat(new_on_wall, np.r_[0, np.cumsum(per_segment)[:-1]]) > 0
+            new_on_wall &= ~np.repeat(_on_cura_segments(new_fill, original_fill, flagged), per_segment)
         on_wall_mm = float(new_weights[new_on_wall].sum())
         if len(original_fill):
             points, weights = sample_segments(original_fill, step)

@@ -637,6 +637,10 @@ class DensityRegion:
     name: str
     polygon: Polygon  # G-code XY
     target: float  # fraction
+    #: a wall-less infill mesh sliced by CuraEngine 4.13: its part of the host's infill area is inset by
+    #: half an inner wall's width (``generateInfill``'s inner-wall offset, kept with no walls), which no
+    #: infill of it, Cura's or the pass's, reaches; CuraEngine 5 does not inset
+    cura4_inset: bool = False
 
 
 def measure_region_densities(parsed: Parsed, geometry: SliceGeometry, settings: SliceSettings,
@@ -645,7 +649,8 @@ def measure_region_densities(parsed: Parsed, geometry: SliceGeometry, settings: 
 
     Regions later in the list win where they overlap; "base" is the rest.  `whole`: each region
     whole, the band along its borders included (issue 15); else its interior, a line width in from
-    its borders (Cura's infill-mesh lines stop short of their mesh's border).
+    its borders (Cura's infill-mesh lines stop short of their mesh's border).  A region with
+    `cura4_inset` is measured without its half line width along the infill area's border.
     Returns name -> (measured fraction, area mm^2 summed over layers).
     """
     fill = _segments_by_layer(parsed.fill_moves(extruding=True))
@@ -660,8 +665,13 @@ def measure_region_densities(parsed: Parsed, geometry: SliceGeometry, settings: 
         lines = _lines(segs)
         claimed = Polygon()
         pieces = []
+        inset_area = None
         for r in reversed(regions):  # later regions win
             piece = area.intersection(r.polygon).difference(claimed)
+            if r.cura4_inset:
+                if inset_area is None:
+                    inset_area = area.buffer(-settings.line_width / 2, join_style=2)
+                piece = piece.intersection(inset_area)
             claimed = claimed.union(r.polygon)
             pieces.append((r.name, piece))
         pieces.append(("base", area.difference(claimed)))

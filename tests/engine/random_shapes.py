@@ -135,6 +135,28 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
+def sliced_or_none(cache, case: EverydayCase, density: float, engine: str, unsliced: list, seed: int):
+    """`cache.get(case, density, engine)`, or None (and `seed` added to `unsliced`, a line printed) when
+    CuraEngine cannot slice it: CuraEngine 5.0 fails an assertion in its combing on a few models (random
+    shape 47, random regions 20), which is not the pass's to judge."""
+    from DelaunayInfill.curaengine import CuraEngineError
+
+    try:
+        return cache.get(case, density, engine)
+    except CuraEngineError as exc:
+        unsliced.append(seed)
+        print(f"{case.name}: CuraEngine {engine} cannot slice it: {str(exc).splitlines()[0][:200]}", flush=True)
+        return None
+
+
+def summary(failed: list, unsliced: list) -> int:
+    """Print the run's last lines; the exit status (1: a seed failed)."""
+    if unsliced:
+        print(f"not sliced (CuraEngine failed): {unsliced}")
+    print(f"failed: {failed}" if failed else "all passed")
+    return 1 if failed else 0
+
+
 def main(argv=None) -> int:
     from .everyday import REPORT_HEADER, EverydaySliceCache, process_and_check, report_row
 
@@ -154,17 +176,18 @@ def main(argv=None) -> int:
         parser.error("--out is required to slice")
     cache = EverydaySliceCache(args.out)
     print(REPORT_HEADER, flush=True)
-    failed = []
+    failed, unsliced = [], []
     for seed in _seeds(args.seeds):
         case, density = random_case(seed)
-        done = cache.get(case, density, args.engine)
+        done = sliced_or_none(cache, case, density, args.engine, unsliced, seed)
+        if done is None:
+            continue
         _, report, result = process_and_check(done)
         print(report_row(done, report, result), case.settings, flush=True)
         if not result.ok:
             failed.append(seed)
             print(result.report(), flush=True)
-    print(f"failed: {failed}" if failed else "all passed")
-    return 1 if failed else 0
+    return summary(failed, unsliced)
 
 
 if __name__ == "__main__":

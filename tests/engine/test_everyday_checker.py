@@ -592,3 +592,21 @@ def test_the_reader_reads_numbers_exactly():
         f"G1 X{word} Y{index} E{index + 1}\n" for index, word in enumerate(words))
     fill = ec.extract_layers(text)[(0, 0)].fill
     assert np.array_equal(fill[:, 1, 0], [float(word) for word in words])
+
+
+def test_a_piece_of_one_of_cura_s_lines_is_cura_s_and_nothing_beside_or_beyond_it_is():
+    """The pass keeps the stretch of a Cura line its new infill does not take over: that piece is where
+    Cura prints (random shape 46 on CuraEngine 5.0: a kept piece along a wall, beside skin, outside the
+    dense reference's lines, counted 4.2 % of a layer outside); a line 0.05 mm beside it, or reaching
+    0.1 mm past its end, is not."""
+    cura = np.array([[[100.0, 100.0], [110.0, 105.0]], [[100.0, 110.0], [100.0, 120.0]]])
+    on_first = np.array([[100.0, 100.0], [110.0, 105.0]])[0] + np.outer([0.2, 0.7], [10.0, 5.0])
+    pieces = np.array([
+        on_first,                                      # a piece of the first
+        on_first[::-1],                                # the same, the other way round
+        on_first + [0.0, 0.05],                        # 0.05 mm beside it
+        [[100.0, 112.0], [100.0, 120.1]],              # past the second's end
+        [[100.0, 112.0], [100.0, 119.0]],              # a piece of the second
+    ])
+    assert ec._on_cura_segments(pieces, cura, np.ones(len(pieces), dtype=bool)).tolist() == [True, True, False, False, True]
+    assert not ec._on_cura_segments(pieces, cura, np.zeros(len(pieces), dtype=bool)).any()  # only the flagged

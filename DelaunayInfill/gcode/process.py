@@ -473,6 +473,19 @@ class _LayerRegions:
 
 
 @dataclass
+class _FillArea:
+    """Where a host's new infill goes in one layer, and what was cut out of its confirmed area for it."""
+
+    area: object  # MultiPolygon, mm
+    regions: list  # the density regions (area, density, name) but the 0 % ones, as the pattern takes them
+    empty: object  # the 0 % regions' union (None: none)
+    empty_parts: list  # (part, name) of each 0 % region, for the report
+    before_empty: object  # the area before the 0 % cut (what a 0 % region's report counts)
+    infill_walls: list  # Cura's infill walls, kept as printed (closed FILL loops), each (m, 2)
+    in_walls: object  # which of the host's FILL segments are on them (None: no infill walls)
+
+
+@dataclass
 class _HostInfill:
     """A mesh with its infill-mesh modifiers in one layer: what it prints, and into which of Cura's blocks."""
 
@@ -1152,7 +1165,6 @@ class _Run:
         g = st.geo
         area = g.area
         zones = self._layer_regions(parse, st, children)
-        region_list, split_parts_only = zones.regions, zones.split_parts_only
         if area.is_empty:
             if len(g.fill):  # nothing confirmed: Cura's infill of this mesh stays, and is counted
                 out.stats["cura_infill_kept_mm"] += float(np.hypot(*(g.fill[:, 1] - g.fill[:, 0]).T).sum())
@@ -1162,22 +1174,8 @@ class _Run:
         density = self._density_of(st.name, g.fill, lw, area, alone=not children)
         if density <= 0.0:
             return None  # a 0 % mesh has no infill (Cura made none)
-        # Cura's Infill Wall Line Count: closed FILL loops round the infill area stay as Cura printed
-        # them, and the new infill fills what they enclose
-        infill_walls, in_walls = closed_loops(g.fill) if self.infill_walls > 0 else ([], None)
-        if infill_walls:
-            with clock("areas"):
-                area = to_multipolygon(area.difference(multilinestring_of(infill_walls).buffer(lw / 2 + 1e-3, 4)))
-        # 0 % regions are "no infill there": cut out of the area, not given to the engine
-        full_area = area
-        region_list, empty, empty_parts = _split_empty_regions(region_list)
-        if empty is not None:
-            area = to_multipolygon(area.difference(empty))
-        if zones.rimmed and not area.is_empty:  # (after the 0 % cut: a modifier's lines stop short of it too)
-            with clock("areas"):
-                area = without_modifier_rims(area, zones.rimmed, lw)
-                if split_parts_only:  # (the split's parts are taken as parts of the area: cut them too)
-                    region_list = [(to_multipolygon(a.intersection(area)), d, name) for a, d, name in region_list]
+        fill = self._fill_area(g, area, zones, lw)
+        area, region_list, empty = fill.area, fill.regions, fill.empty
         my_blocks, fill_blocks, start, end = _host_blocks(parse.blocks, {st.name, *(c.name for c in children)})
         if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
             paths, used_regions = [], []
@@ -1190,16 +1188,37 @@ class _Run:
                 result = self._clip(pattern, area, start, end)
                 paths = self._paths(result, min_length=lw)  # (a stub under a line width prints a blob)
             with clock("density report"):
-                self._measure(result, paths, area, density, used_regions, lw, disjoint=split_parts_only,
+                self._measure(result, paths, area, density, used_regions, lw, disjoint=zones.split_parts_only,
                               base_name=self._base_name(st.name, density))
         reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
         with clock("Cura's lines kept"):
-            paths = self._with_cura_kept(st, children, area, paths, reach, empty, start, out, infill_walls, in_walls,
-                                         end)
-        for part, zname in empty_parts:
-            self._tally(zname, 0.0, 0.0, part.intersection(full_area).area)
+            paths = self._with_cura_kept(st, children, area, paths, reach, empty, start, out, fill.infill_walls,
+                                         fill.in_walls, end)
+        for part, zname in fill.empty_parts:
+            self._tally(zname, 0.0, 0.0, part.intersection(fill.before_empty).area)
         travel_part = g.part if g.part is not None else area.buffer(lw / 2)
         return _HostInfill(st, my_blocks, fill_blocks, paths, reach, empty, zones.covered_children, travel_part)
+
+    def _fill_area(self, g: MeshLayer, area, zones: _LayerRegions, lw: float) -> _FillArea:
+        """Where the new infill goes in a host's confirmed `area`: inside Cura's infill walls, outside the 0 %
+        regions, and (CuraEngine 4) half a line width clear of the border inside wall-less modifiers."""
+        # Cura's Infill Wall Line Count: closed FILL loops round the infill area stay as Cura printed
+        # them, and the new infill fills what they enclose
+        infill_walls, in_walls = closed_loops(g.fill) if self.infill_walls > 0 else ([], None)
+        if infill_walls:
+            with self.clock("areas"):
+                area = to_multipolygon(area.difference(multilinestring_of(infill_walls).buffer(lw / 2 + 1e-3, 4)))
+        # 0 % regions are "no infill there": cut out of the area, not given to the engine
+        before_empty = area
+        regions, empty, empty_parts = _split_empty_regions(zones.regions)
+        if empty is not None:
+            area = to_multipolygon(area.difference(empty))
+        if zones.rimmed and not area.is_empty:  # (after the 0 % cut: a modifier's lines stop short of it too)
+            with self.clock("areas"):
+                area = without_modifier_rims(area, zones.rimmed, lw)
+                if zones.split_parts_only:  # (the split's parts are taken as parts of the area: cut them too)
+                    regions = [(to_multipolygon(a.intersection(area)), d, name) for a, d, name in regions]
+        return _FillArea(area, regions, empty, empty_parts, before_empty, infill_walls, in_walls)
 
     def _layer_regions(self, parse: LayerParse, st: _MeshStep, children: list) -> _LayerRegions:
         """The density regions of a host in this layer: its modifiers' parts, then the user's at its slice height.

@@ -202,8 +202,8 @@ def _opened_as_cura4(area, line_width: float):
 
     (``generateInfill``: ``offset(-w / 2).offset(w / 2)``, Clipper's mitre joins with a limit of 1.2,
     which cut corners almost as round ones do.)  Strips narrower than a line width go, and sharp tips
-    lose what no line-wide disc reaches: CuraEngine 4.13 prints no infill there (random regions 25: a
-    line into a tip reached 0.4 mm past Cura's).  CuraEngine 5 does not open the area.
+    lose what no line-wide disc reaches: CuraEngine 4.13 prints no infill there.  CuraEngine 5 does
+    not open the area.
     """
     r = line_width / 2
     return _grown_back(area, area.buffer(-r, join_style=2, mitre_limit=1.2), r, mitre_limit=1.2)

@@ -21,7 +21,8 @@ from .geometry import as_area, polygons_of
 __all__ = ["cross_turn", "reflex_vertices", "is_convex", "decompose_convex"]
 
 _TOL = 1e-9
-_SLIVER_MM2 = 0.01  # a piece this small that cannot be split further is left out
+_SLIVER_MM2 = 0.01  # a piece this small that cannot be split further is left out ...
+_SLIVER_WIDTH_MM = 0.02  # ... and one this thin on average (twice its area over its perimeter), however long
 
 
 def cross_turn(ring: np.ndarray) -> np.ndarray:
@@ -135,8 +136,8 @@ def decompose_convex(region) -> list[Polygon]:
     -------
     list of Polygon
         Convex pieces covering the region exactly (no overlaps), but for slivers
-        of at most 0.01 mm² (units mm) that no diagonal, edge extension or
-        triangulation splits.
+        of at most 0.01 mm² or 0.02 mm wide on average (units mm) that no
+        diagonal, edge extension or triangulation splits.
     """
     stack = [orient(p, 1.0) for p in polygons_of(as_area(region))]
     out: list[Polygon] = []
@@ -155,7 +156,7 @@ def decompose_convex(region) -> list[Polygon]:
             # edge of a reflex vertex carried on into the polygon, else into ear-clipped triangles.
             pieces = _extension_pieces(poly) or _triangles(poly)
         if len(pieces) < 2:
-            if poly.area <= _SLIVER_MM2:
+            if poly.area <= _SLIVER_MM2 or 2.0 * poly.area <= _SLIVER_WIDTH_MM * poly.length:
                 continue  # a sliver (where two borders almost meet) that nothing fits in: left out
             raise ValueError("convex decomposition failed: no valid diagonal at a concave vertex")
         stack.extend(orient(p, 1.0) for p in pieces)

@@ -81,7 +81,9 @@ def _convex_parts(area, dmap: DensityMap, width: float) -> list:
         for polygon in polygons_of(zone):
             if polygon.area < 1e-3 * width * width:
                 continue  # a sliver between zones: no line fits in it
-            parts.extend((convex, zone_index) for convex in decompose_convex(polygon))
+            # (a decomposition of a needle-thin zone can leave pieces thinner still)
+            parts.extend((convex, zone_index) for convex in decompose_convex(polygon)
+                         if convex.area >= 1e-3 * width * width)
     return parts
 
 

@@ -335,6 +335,17 @@ def _printed_kinds(parse: LayerParse) -> set[int]:
     return hit
 
 
+def _walled_meshes(parse: LayerParse) -> set[str]:
+    """The meshes that print an outer wall in this layer, by ``;MESH:`` name and by file name."""
+    names = {parse.meshes[code // 64] for code in _printed_kinds(parse) if code % 64 == WALL_OUTER}
+    return names | {_file_name(name) for name in names}
+
+
+def _file_name(mesh: str) -> str:
+    """A ``;MESH:`` name without its folders (a Region made from the mesh may be named either way)."""
+    return mesh.replace("\\", "/").rsplit("/", 1)[-1]
+
+
 def _has_both_walls(parse: LayerParse, mesh: str) -> bool:
     """Whether `mesh` prints an outer and an inner wall in this layer (else `wall_line_width` is None)."""
     if mesh not in parse.meshes:
@@ -470,6 +481,15 @@ class _LayerRegions:
     covered_children: set  # modifiers whose area the host's seamless pattern fills
     split_parts_only: bool  # the regions are only the modifier split's parts (disjoint, inside the area)
     rimmed: list = field(default_factory=list)  # areas of wall-less infill meshes whose infill Cura insets
+
+
+@dataclass
+class _Nesting:
+    """How a host meets the other hosts of its layer: a mesh with walls inside it (an infill mesh made with
+    Per Model Settings), or its own part inside such a mesh."""
+
+    inner_parts: list = field(default_factory=list)  # parts of the hosts inside this one (they fill them)
+    lines_inside: object = None  # (k, 2, 2) Cura FILL of the outer host's modifiers inside this one, mm
 
 
 @dataclass
@@ -1090,9 +1110,10 @@ class _Run:
                     st.geo = mesh_layer(parse, name, st.line_width, st.overlap, st.closing, self.area_cache,
                                         cura4_opening=self.cura4)
         out = _LayerOut(retraction=self._retraction())
+        children_of = {name: [steps[c] for c, p in parent_of.items() if p == name] for name in hosts}
+        nesting = self._nesting(steps, hosts, children_of)
         for name in hosts:
-            children = [steps[c] for c, p in parent_of.items() if p == name]
-            host = self._host_infill(parse, steps[name], children, out)
+            host = self._host_infill(parse, steps[name], children_of[name], out, nesting.get(name))
             if host is None:
                 continue
             with clock("routes"):
@@ -1101,6 +1122,37 @@ class _Run:
                 self._emit_host(parse, host, out)
         with clock("emit"):
             return self._splice(parse, out)
+
+    def _nesting(self, steps: dict, hosts: list, children_of: dict) -> dict[str, _Nesting]:
+        """Hosts with walls that lie inside another host's part (an infill mesh with walls of its own):
+        {host: _Nesting}, only for the hosts concerned.
+
+        The inner one fills its part (`without_foreign` cuts it out of the outer one's area).  A wall-less
+        modifier of the outer host may reach into it (Cura lets a modifier of higher order win there): its
+        Cura lines inside are the inner host's to confirm and to keep where its new infill does not take
+        over, never the outer host's (random regions 96: they were kept beside the inner host's new
+        infill, which printed that place twice).
+        """
+        parts = {n: steps[n].geo.part for n in hosts if steps[n].geo.has_walls and steps[n].geo.part is not None}
+        if len(parts) < 2:
+            return {}
+        out: dict[str, _Nesting] = {}
+        for outer, outer_part in parts.items():
+            grown = self._grown(outer_part, steps[outer].line_width)
+            for inner, inner_part in parts.items():
+                if inner == outer or inner_part.difference(grown).area > 0.1 * inner_part.area:
+                    continue
+                out.setdefault(outer, _Nesting()).inner_parts.append(inner_part)
+                fill = [c.geo.fill for c in children_of[outer] if len(c.geo.fill)]
+                if not fill:
+                    continue
+                fill = np.concatenate(fill)
+                middle = fill.mean(axis=1)
+                inside = fill[contains_xy(inner_part, middle[:, 0], middle[:, 1])]
+                if len(inside):
+                    nest = out.setdefault(inner, _Nesting())
+                    nest.lines_inside = inside if nest.lines_inside is None else np.concatenate([nest.lines_inside, inside])
+        return out
 
     def _mesh_steps(self, parse: LayerParse) -> dict:
         """Every mesh with FILL in the layer: its line width, overlap and rebuilt area (`mesh_layer`)."""
@@ -1139,9 +1191,9 @@ class _Run:
         hosts = [st for st in steps.values() if s.enabled(st.name) and st.geo.has_walls and st.geo.part is not None]
         parent_of: dict[str, str] = {}
         for st in steps.values():
-            ms = s.mesh(st.name)
-            explicit = ms is not None and ms.region_density is not None
-            if st.geo.has_walls and not explicit:
+            # A mesh with walls here prints its own infill inside them (Cura cuts it out of the mesh around it,
+            # and so does `without_foreign`): a host of its own, even when it is a density region.
+            if st.geo.has_walls:
                 continue
             for host in hosts:
                 if host.name == st.name:
@@ -1152,16 +1204,19 @@ class _Run:
                     break
         return parent_of
 
-    def _host_infill(self, parse: LayerParse, st: _MeshStep, children: list, out: _LayerOut):
+    def _host_infill(self, parse: LayerParse, st: _MeshStep, children: list, out: _LayerOut,
+                     nesting: _Nesting | None = None):
         """The new infill of a host mesh and its modifiers (None: none, Cura's stays): its area confirmed by
-        Cura's lines, its density regions, the pattern's paths, and Cura's lines where those do not take over."""
+        Cura's lines, its density regions, the pattern's paths, and Cura's lines where those do not take over.
+        `nesting`: the hosts inside this one, or the outer host's modifier lines inside this one."""
+        nesting = nesting or _Nesting()
         lw = st.line_width
         clock = self.clock
         with clock("areas"):  # other meshes' walls and skin, and an infill mesh with walls inside this one
             st.geo = without_foreign(parse, st.geo, lw, self.area_cache)
         if not st.geo.used_hull:  # (a hull is made of the lines: witnessed already)
             with clock("areas"):
-                st.geo = self._witnessed(parse, st.geo, [c.geo for c in children], lw)
+                st.geo = self._witnessed(parse, st.geo, [c.geo.fill for c in children], lw, nesting.lines_inside)
         g = st.geo
         area = g.area
         zones = self._layer_regions(parse, st, children)
@@ -1192,8 +1247,10 @@ class _Run:
                               base_name=self._base_name(st.name, density))
         reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
         with clock("Cura's lines kept"):
-            paths = self._with_cura_kept(st, children, area, paths, reach, empty, start, out, fill.infill_walls,
-                                         fill.in_walls, end)
+            not_kept = empty if not nesting.inner_parts else to_multipolygon(
+                unary_union([*nesting.inner_parts, *([empty] if empty is not None else [])]))
+            paths = self._with_cura_kept(st, children, area, paths, reach, not_kept, start, out, fill.infill_walls,
+                                         fill.in_walls, end, nesting.lines_inside)
         for part, zname in fill.empty_parts:
             self._tally(zname, 0.0, 0.0, part.intersection(fill.before_empty).area)
         travel_part = g.part if g.part is not None else area.buffer(lw / 2)
@@ -1216,8 +1273,11 @@ class _Run:
         if zones.rimmed and not area.is_empty:  # (after the 0 % cut: a modifier's lines stop short of it too)
             with self.clock("areas"):
                 area = without_modifier_rims(area, zones.rimmed, lw)
-                if zones.split_parts_only:  # (the split's parts are taken as parts of the area: cut them too)
-                    regions = [(to_multipolygon(a.intersection(area)), d, name) for a, d, name in regions]
+                if zones.split_parts_only:  # (the split's parts are taken as parts of the area: cut them too,
+                    # less the slivers the cut leaves along the rim, which no line fits in)
+                    clipped = [([p for p in polygons_of(a.intersection(area)) if p.area > lw * lw], d, name)
+                               for a, d, name in regions]
+                    regions = [(to_multipolygon(unary_union(ps)), d, name) for ps, d, name in clipped if ps]
         return _FillArea(area, regions, empty, empty_parts, before_empty, infill_walls, in_walls)
 
     def _layer_regions(self, parse: LayerParse, st: _MeshStep, children: list) -> _LayerRegions:
@@ -1227,8 +1287,11 @@ class _Run:
         a 0 % modifier's empty place to its neighbour: the command line's ``--modifier FILE.stl:0`` must
         hold there).
         """
+        # (a region that is another mesh with walls here is cut out of this one's area with its walls: its
+        # density is that mesh's, and in this one's pattern it would only thin the infill round it)
+        others = _walled_meshes(parse) - {st.name, _file_name(st.name)}
         given = [(a, r.density, r.name or f"region {k + 1}") for k, r in enumerate(self.user_regions)
-                 for a in [r.at(self._slice_z(parse.z))] if not a.is_empty]
+                 if not (r.name and r.name in others) for a in [r.at(self._slice_z(parse.z))] if not a.is_empty]
         # Without user regions here, the regions are the modifier split's parts: disjoint, inside the area.
         zones = _LayerRegions([], set(), split_parts_only=not given)
         # (the modifiers' parts are pieces of the host's area: `_modifier_areas` splits it)
@@ -1238,7 +1301,7 @@ class _Run:
             if ca.is_empty:
                 continue
             zones.covered_children.add(c.name)
-            mine = [a for a, _, name in given if name in (c.name, c.name.replace("\\", "/").rsplit("/", 1)[-1])]
+            mine = [a for a, _, name in given if name in (c.name, _file_name(c.name))]
             if self.cura4 and not c.geo.has_walls:
                 zones.rimmed.extend(mine or [ca])
             if mine:
@@ -1248,16 +1311,19 @@ class _Run:
         zones.regions.extend(given)
         return zones
 
-    def _with_cura_kept(self, st: _MeshStep, children: list, area, paths: list, reach: float, empty, start,
-                        out: _LayerOut, infill_walls: list = (), in_walls=None, end=None) -> list:
+    def _with_cura_kept(self, st: _MeshStep, children: list, area, paths: list, reach: float, not_kept, start,
+                        out: _LayerOut, infill_walls: list = (), in_walls=None, end=None, lines_inside=None) -> list:
         """`paths` with Cura's lines where the new infill does not take over, all in print order.
 
         Those lines (a part not confirmed, an island too small for the pattern, Cura's infill walls)
-        are printed as Cura printed them, on the route with the new paths; `out` counts them.
+        are printed as Cura printed them, on the route with the new paths; `out` counts them.  None is
+        kept in `not_kept` (0 % regions, the hosts inside this one); `lines_inside` are Cura lines of an
+        outer host's modifier inside this one, kept as its own are.
         """
         own = st.geo.fill if in_walls is None else st.geo.fill[~in_walls]
-        cura_fill = np.concatenate([own, *(c.geo.fill for c in children)])
-        kept = [*kept_cura_pieces(cura_fill, area, paths, st.line_width, reach, empty), *infill_walls]
+        cura_fill = np.concatenate([own, *(c.geo.fill for c in children),
+                                    *([lines_inside] if lines_inside is not None else [])])
+        kept = [*kept_cura_pieces(cura_fill, area, paths, st.line_width, reach, not_kept), *infill_walls]
         if kept:
             paths, _ = order_paths([*paths, *kept], start, end=end)
         out.stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))
@@ -1399,9 +1465,10 @@ class _Run:
             time_lines = _time_lines(out_lines)
         return (out_lines, time_lines, edits), out.dt, stats
 
-    def _witnessed(self, parse: LayerParse, g, children: list, lw: float):
-        """`g` with its area cut to what Cura's FILL lines of it and its modifiers confirm (remembered)."""
-        fills = [g.fill, *(c.fill for c in children)]
+    def _witnessed(self, parse: LayerParse, g, child_fills: list, lw: float, lines_inside=None):
+        """`g` with its area cut to what Cura's FILL lines of it and its modifiers (and `lines_inside`, an outer
+        host's modifier lines inside it, (k, 2, 2)) confirm (remembered)."""
+        fills = [g.fill, *child_fills, *([lines_inside] if lines_inside is not None else [])]
         h = hashlib.blake2b(digest_size=16)
         for f in fills:
             h.update(np.round(f, 3).tobytes() + b"|")

@@ -233,10 +233,38 @@ def zone_densities(done: EverydaySlice, drawn: RegionsCase, processed: str) -> l
 # --------------------------------------------------------------------------- running
 
 
+def plugin_settings(done: EverydaySlice, drawn: RegionsCase):
+    """``(ProcessSettings, [Region])`` as the plugin makes them in Cura: its adapter
+    (``cura.adapter.build_settings``) on a scene snapshot of the case, every mesh's values those the
+    engine resolved for the slice, the regions' triangles in G-code coordinates."""
+    from DelaunayInfill import curaengine
+    from DelaunayInfill.cura.adapter import build_settings
+    from DelaunayInfill.cura.snapshot import MeshSnapshot, SceneSnapshot
+
+    from .engines import engine
+    from .everyday import mesh_triangles
+
+    case = drawn.case
+    per_mesh = list(case.mesh_settings) or [{}] * len(case.models)
+    resolved = curaengine.resolve_settings({**case.settings, "infill_sparse_density": drawn.density},
+                                           list(zip(case.mesh_names(), per_mesh, strict=True)),
+                                           resources=engine(done.version).resources)
+    base = {**resolved.global_values, **resolved.extruder_values}
+    offset = np.array([*done.bed_offset, 0.0])
+    meshes = []
+    for (name, values), (model, _) in zip(resolved.meshes, case.models, strict=True):
+        region = bool(values.get("infill_mesh"))
+        meshes.append(MeshSnapshot(name=name, values={**base, **values}, enabled=True, is_region=region,
+                                   triangles=mesh_triangles(MODELS[model]()) + offset if region else None))
+    return build_settings(SceneSnapshot(global_values=dict(resolved.global_values),
+                                        extruder_values={0: dict(resolved.extruder_values)}, meshes=meshes))
+
+
 def process_and_judge(done: EverydaySlice, drawn: RegionsCase, as_plugin: bool):
-    """Process `done` as the plugin does (`as_plugin`: every modifier's triangles given as a region) or
-    as the command line does (the G-code alone, but for the 0 % modifiers, which leave no trace in it, and
-    those drawn over them: the README has them given with ``--modifier``); judge it: (report, checker result, zones, problems)."""
+    """Process `done` as the plugin does (`as_plugin`: its settings and regions from Cura's values,
+    `plugin_settings`) or as the command line does (the G-code alone, but for the 0 % modifiers, which
+    leave no trace in it, and those drawn over them: the README has them given with ``--modifier``);
+    judge it: (report, checker result, zones, problems)."""
     import os
 
     from DelaunayInfill import process_gcode
@@ -250,14 +278,15 @@ def process_and_judge(done: EverydaySlice, drawn: RegionsCase, as_plugin: bool):
         original = f.read()
     with open(done.reference_gcode, encoding="utf-8") as f:
         reference = f.read()
-    offset = np.array([*done.bed_offset, 0.0])
-    given = list(drawn.regions)
-    if not as_plugin:  # the 0 % ones, and the later ones that win over them (given regions win over the G-code's)
-        zero = [k for k, r in enumerate(given) if r.density <= 0]
-        given = given[zero[0]:] if zero else []
-    regions = [Region(r.density / 100.0, triangles=mesh_triangles(MODELS[r.name]()) + offset, name=f"{r.name}.stl")
-               for r in given]
-    layers, report = process_gcode(as_cura_list(original), regions=regions)
+    if as_plugin:
+        settings, regions = plugin_settings(done, drawn)
+    else:  # the 0 % ones, and the later ones that win over them (given regions win over the G-code's)
+        zero = [k for k, r in enumerate(drawn.regions) if r.density <= 0]
+        offset = np.array([*done.bed_offset, 0.0])
+        settings, regions = None, [
+            Region(r.density / 100.0, triangles=mesh_triangles(MODELS[r.name]()) + offset, name=f"{r.name}.stl")
+            for r in (drawn.regions[zero[0]:] if zero else ())]
+    layers, report = process_gcode(as_cura_list(original), settings, regions=regions)
     processed = "".join(layers)
     with open(os.path.join(done.folder, f"processed-{'plugin' if as_plugin else 'cli'}.gcode"), "w",
               encoding="utf-8") as f:

@@ -58,3 +58,23 @@ def test_random_regions_are_the_same_on_every_run():
     first, again = random_regions_case(3), random_regions_case(3)
     assert first.regions == again.regions and first.case.mesh_settings == again.case.mesh_settings
     assert random_regions_case(4).regions != first.regions
+
+
+@pytest.mark.parametrize("version", ["4.13"])  # (CuraEngine 5.0 fails an assertion in its combing on this model)
+def test_a_region_with_walls_under_another_is_replaced_once(region_slices, version):
+    """Random regions 96: an 80 % cube with walls (Per Model Settings) and an 80 % wall-less cylinder over
+    it, in a 40 % gyroid print.  The plugin took the cube for a modifier of the model (it is a density
+    region), so its infill was never replaced: 14.2 m of Cura's lines kept.  Taken as a host of its own, the
+    cylinder's lines inside it were kept by the model beside the cube's new infill (that place printed
+    twice, 14.2 m again).  Now the cube fills itself, the cylinder's part in it included, and little of
+    Cura's is kept."""
+    drawn = random_regions_case(96)
+    try:
+        sliced = region_slices.get(drawn.case, drawn.density, version)
+    except CuraEngineError as exc:
+        pytest.fail(f"CuraEngine {version} cannot slice random regions 96: {exc}", pytrace=False)
+    report, result, _, problems = process_and_judge(sliced, drawn, as_plugin=True)
+    assert result.ok and not problems, result.report() + "\n".join(problems)
+    regions = {r.name: r for r in report.regions}
+    assert "region_96_1.stl" in regions and abs(regions["region_96_1.stl"].measured - 0.8) < 0.03, report.format_table()
+    assert report.cura_infill_kept_mm < 0.01 * report.infill_after_mm, report.format_table()

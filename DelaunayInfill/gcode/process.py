@@ -1273,11 +1273,8 @@ class _Run:
         if zones.rimmed and not area.is_empty:  # (after the 0 % cut: a modifier's lines stop short of it too)
             with self.clock("areas"):
                 area = without_modifier_rims(area, zones.rimmed, lw)
-                if zones.split_parts_only:  # (the split's parts are taken as parts of the area: cut them too,
-                    # less the slivers the cut leaves along the rim, which no line fits in)
-                    clipped = [([p for p in polygons_of(a.intersection(area)) if p.area > lw * lw], d, name)
-                               for a, d, name in regions]
-                    regions = [(to_multipolygon(unary_union(ps)), d, name) for ps, d, name in clipped if ps]
+                if zones.split_parts_only:  # (the split's parts are taken as parts of the area: cut them too)
+                    regions = [(to_multipolygon(a.intersection(area)), d, name) for a, d, name in regions]
         return _FillArea(area, regions, empty, empty_parts, before_empty, infill_walls, in_walls)
 
     def _layer_regions(self, parse: LayerParse, st: _MeshStep, children: list) -> _LayerRegions:

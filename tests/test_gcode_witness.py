@@ -4,6 +4,7 @@
 * `skin_region` is the skin's lines and the space between them;
 * `witnessed` keeps only the pieces of an area that hold Cura lines, within reach of them;
 * `kept_cura_pieces` keeps Cura's lines where the new infill does not take over;
+* `isolated_cura_lines` finds a dense modifier's lines cut off from the rest of its zone, far from new lines;
 * end to end on synthetic Cura layers: no new infill in a hole whose wall came in three pieces, none
   on skin inside the infill, a small island keeps infill, a zero-length E move is never written;
 * the ``;SETTING_3`` footer: Cura's density is read from it, lightning keeps Cura's infill.
@@ -23,7 +24,16 @@ from DelaunayInfill.gcode.area import skin_region, wall_rings
 from DelaunayInfill.gcode.footer import read_footer
 from DelaunayInfill.gcode.infer import _quantile
 from DelaunayInfill.gcode.read import as_cura_list
-from DelaunayInfill.gcode.witness import _all_near, _near, _polylines, kd_tree, kept_cura_pieces, witnessed
+from DelaunayInfill.gcode.witness import (
+    _all_near,
+    _near,
+    isolated_cura_lines,
+    kd_tree,
+    kept_cura_pieces,
+    new_line_places,
+    segment_polylines,
+    witnessed,
+)
 
 LW = 0.4
 E_PER_MM = 0.0333
@@ -162,7 +172,7 @@ def test_witnessed_takes_segments_as_well_as_runs():
     runs = [np.array([[1.0, y], [20.0, y], [39.0, y + 0.5]]) for y in np.arange(1.0, 20.0, 4.0)]
     segments = np.concatenate([np.stack([r[:-1], r[1:]], axis=1) for r in runs])
     assert witnessed(area, segments, LW, 4.0).equals(witnessed(area, runs, LW, 4.0))
-    assert [r.tolist() for r in _polylines(segments)] == [r.tolist() for r in runs]
+    assert [r.tolist() for r in segment_polylines(segments)] == [r.tolist() for r in runs]
 
 
 def test_grouped_reach_queries_answer_as_one_query_per_point():
@@ -210,6 +220,28 @@ def test_kept_cura_pieces_where_no_new_line_takes_over():
     assert abs(kept_lines.intersection(box(29, 4, 36, 6)).length - 5.0) < 0.5  # outside the area
     # a 0 % region needs no infill
     assert kept_cura_pieces(cura[:1], area, [], LW, 3.0, no_infill=box(0, 0, 20, 5)) == []
+
+
+def test_a_dense_modifier_s_lines_cut_off_from_its_zone_and_far_from_new_lines_are_isolated():
+    """Random regions 75: a 60 % modifier's corner beyond a skin band (two short Cura lines, 0.9 mm) with the
+    nearest new line 2.3 mm away; the host's sparse reach took that for covered."""
+    spacing = LW / 0.6
+    zone = [[[x, 0.0], [x, 10.0]] for x in np.arange(0.0, 10.0, 2 * spacing)]  # the modifier's main zone
+    corner = [[[16.0, 5.0], [16.4, 5.1]], [[16.5, 5.0], [16.6, 4.5]]]  # beyond the skin, 6 mm on
+    cura = np.array(zone + corner)
+    new = [np.array([[0.5, 0.0], [0.5, 10.0], [9.5, 10.0]]), np.array([[18.6, 2.0], [18.6, 8.0]])]
+    alone = isolated_cura_lines(cura, new_line_places(new, LW), LW, link=2 * spacing, reach=2.5 * spacing)
+    assert alone.tolist() == [False] * len(zone) + [True, True]
+    # a new line within reach takes the corner over; so does joining the zone (the band beside a region:
+    # Cura's lines there are one group with the zone's, which new lines reach)
+    near = [new[0], np.array([[17.5, 2.0], [17.5, 8.0]])]
+    assert not isolated_cura_lines(cura, new_line_places(near, LW), LW, link=2 * spacing, reach=2.5 * spacing).any()
+    assert not isolated_cura_lines(cura, new_line_places(new, LW), LW, link=8.0, reach=2.5 * spacing).any()
+    # a stub of new infill takes nothing over; no Cura lines, nothing isolated
+    stub = [new[0], np.array([[16.2, 5.3], [16.4, 5.3]])]
+    assert isolated_cura_lines(cura, new_line_places(stub, LW), LW, link=2 * spacing, reach=2.5 * spacing)[-2:].all()
+    assert isolated_cura_lines(np.zeros((0, 2, 2)), new_line_places(new, LW), LW, link=1.0, reach=1.0).size == 0
+    assert new_line_places(stub[1:], LW) is None and isolated_cura_lines(cura, None, LW, 1.0, 1.0).all()
 
 
 def test_a_stub_of_new_infill_does_not_take_over_a_small_island():

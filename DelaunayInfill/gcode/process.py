@@ -75,7 +75,15 @@ from .replay import (
 from .settings import MeshSettings, ProcessReport, ProcessSettings, Region, RegionReport
 from .split import split_by_line_ends
 from .stages import OFF
-from .witness import kd_tree, kept_cura_pieces, witness_radius, witnessed
+from .witness import (
+    isolated_cura_lines,
+    kd_tree,
+    kept_cura_pieces,
+    new_line_places,
+    segment_polylines,
+    witness_radius,
+    witnessed,
+)
 
 __all__ = [
     "process_gcode",
@@ -1273,8 +1281,10 @@ class _Run:
         if zones.rimmed and not area.is_empty:  # (after the 0 % cut: a modifier's lines stop short of it too)
             with self.clock("areas"):
                 area = without_modifier_rims(area, zones.rimmed, lw)
-                if zones.split_parts_only:  # (the split's parts are taken as parts of the area: cut them too)
-                    regions = [(to_multipolygon(a.intersection(area)), d, name) for a, d, name in regions]
+                if zones.split_parts_only:  # (the split's parts are taken as parts of the area: cut them too;
+                    # a part all in the rim is no region here)
+                    cut = [(to_multipolygon(a.intersection(area)), d, name) for a, d, name in regions]
+                    regions = [(a, d, name) for a, d, name in cut if not a.is_empty]
         return _FillArea(area, regions, empty, empty_parts, before_empty, infill_walls, in_walls)
 
     def _layer_regions(self, parse: LayerParse, st: _MeshStep, children: list) -> _LayerRegions:
@@ -1318,9 +1328,9 @@ class _Run:
         outer host's modifier inside this one, kept as its own are.
         """
         own = st.geo.fill if in_walls is None else st.geo.fill[~in_walls]
-        cura_fill = np.concatenate([own, *(c.geo.fill for c in children),
-                                    *([lines_inside] if lines_inside is not None else [])])
-        kept = [*kept_cura_pieces(cura_fill, area, paths, st.line_width, reach, not_kept), *infill_walls]
+        child_fills, apart = self._modifier_lines_apart(children, paths, st.line_width, reach, not_kept)
+        cura_fill = np.concatenate([own, *child_fills, *([lines_inside] if lines_inside is not None else [])])
+        kept = [*kept_cura_pieces(cura_fill, area, paths, st.line_width, reach, not_kept), *apart, *infill_walls]
         if kept:
             paths, _ = order_paths([*paths, *kept], start, end=end)
         out.stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))
@@ -1461,6 +1471,34 @@ class _Run:
         if not all(out_lines[t].startswith(";TIME_ELAPSED:") for t in time_lines):
             time_lines = _time_lines(out_lines)
         return (out_lines, time_lines, edits), out.dt, stats
+
+    def _modifier_lines_apart(self, children: list, paths: list, lw: float, reach: float,
+                              not_kept) -> tuple[list, list]:
+        """The modifiers' Cura lines, less the groups of them that no new line comes near for that modifier's
+        own density (`isolated_cura_lines`), and those groups as polylines to keep (none in `not_kept`).
+        A modifier no denser than the host's sparsest zone (whose `reach` `kept_cura_pieces` uses) is left
+        to that."""
+        fills, apart, places = [], [], None
+        for c in children:
+            fill = c.geo.fill
+            if len(fill) == 0:
+                continue
+            spacing = lw / self._cura_density(c.name, fill, lw)
+            if 2.5 * spacing >= reach:
+                fills.append(fill)
+                continue
+            if places is None:
+                places = new_line_places(paths, lw)
+            alone = isolated_cura_lines(fill, places, lw, link=2.0 * spacing, reach=2.5 * spacing)
+            if alone.any() and not_kept is not None and not not_kept.is_empty:
+                middle = fill[alone].mean(axis=1)
+                alone[np.flatnonzero(alone)[contains_xy(not_kept, middle[:, 0], middle[:, 1])]] = False
+            fills.append(fill[~alone])
+            if not alone.any():
+                continue
+            # (as `kept_cura_pieces`: a piece under a line width prints a blob)
+            apart.extend(p for p in segment_polylines(fill[alone]) if np.hypot(*np.diff(p, axis=0).T).sum() >= lw)
+        return fills, apart
 
     def _witnessed(self, parse: LayerParse, g, child_fills: list, lw: float, lines_inside=None):
         """`g` with its area cut to what Cura's FILL lines of it and its modifiers (and `lines_inside`, an outer

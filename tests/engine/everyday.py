@@ -771,7 +771,15 @@ def process_and_check(done: EverydaySlice):
         f.write(processed)
     result = check_everyday(original, processed, reference, done.section_at, spacing=done.spacing,
                             line_width=done.line_width)
+    add_failed_layers(result, report)
     return processed, report, result
+
+
+def add_failed_layers(result, report) -> None:
+    """A layer the pass failed keeps Cura's infill, which the checker passes: a problem all the same."""
+    if report.failed_layers:
+        result.add_problem(f"{len(report.failed_layers)} layer(s) failed and kept Cura's infill: "
+                           + "; ".join(report.failure_messages[:3]))
 
 
 def report_row(done: EverydaySlice, report, result) -> str:

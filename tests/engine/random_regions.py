@@ -271,7 +271,7 @@ def process_and_judge(done: EverydaySlice, drawn: RegionsCase, as_plugin: bool):
     from DelaunayInfill.gcode.read import as_cura_list
     from DelaunayInfill.gcode.settings import Region
 
-    from .everyday import mesh_triangles
+    from .everyday import add_failed_layers, mesh_triangles
     from .everyday_check import check_everyday
 
     with open(done.cura_gcode, encoding="utf-8") as f:
@@ -295,6 +295,7 @@ def process_and_judge(done: EverydaySlice, drawn: RegionsCase, as_plugin: bool):
     sparsest = min(d for d in (drawn.density, *(r.density for r in drawn.regions)) if d > 0) / 100.0
     result = check_everyday(original, processed, reference, done.section_at, spacing=2.0 * done.line_width / sparsest,
                             line_width=done.line_width)
+    add_failed_layers(result, report)
     zones = zone_densities(done, drawn, processed)
     # (from the G-code alone a modifier's density and border are read off its lines: judged as the
     # plugin prints them; the command line's are shown, and a 0 % region must stay empty in both)

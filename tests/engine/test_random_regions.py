@@ -24,8 +24,10 @@ from .everyday import EverydaySliceCache, report_row
 from .random_regions import process_and_judge, random_regions_case
 
 #: seeds 1, 10 and 15 put 1-12 % of a layer's new infill in the rim a wall-less modifier leaves empty
-#: in CuraEngine 4.13 (before `area.without_modifier_rims`); 2 has a 0 % region
-SEEDS = (*range(12), 15)
+#: in CuraEngine 4.13 (before `area.without_modifier_rims`); 2 has a 0 % region; 59 failed a layer (a
+#: modifier's part all in that rim: an empty region); 75 lost an island's Cura line from the G-code alone
+#: (a 60 % corner cut off by skin, `witness.isolated_cura_lines`)
+SEEDS = (*range(12), 15, 59, 75)
 
 
 @pytest.fixture(scope="module")

@@ -320,23 +320,6 @@ def isolated_cura_lines(cura: np.ndarray, new_places: cKDTree | None, line_width
         near = new_places.query(places, distance_upper_bound=reach)[0] <= reach
         taken[group[owner[near]]] = True
     return ~taken[group]
-    places, seg = segment_samples(cura, line_width / 2)
-    pairs = kd_tree(places).query_pairs(link, output_type="ndarray")
-    n = len(places)
-    # the places of one segment are one group whatever `link` is
-    chain = np.flatnonzero(seg[1:] == seg[:-1])
-    rows = np.r_[pairs[:, 0], chain]
-    cols = np.r_[pairs[:, 1], chain + 1]
-    _, group = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)), directed=False)
-    new = _samples(_long_paths(new_paths, 2 * line_width), line_width / 2)
-    if len(new):
-        near = kd_tree(new).query(places, distance_upper_bound=reach)[0] <= reach
-        taken = np.bincount(group, weights=near.astype(float), minlength=group.max() + 1) > 0
-    else:
-        taken = np.zeros(group.max() + 1, dtype=bool)
-    place_isolated = ~taken[group]
-    isolated[np.unique(seg[place_isolated])] = True
-    return isolated
 
 
 def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width: float, reach: float,

@@ -659,6 +659,29 @@ def test_a_wall_less_modifier_loses_half_a_line_width_along_the_area_s_border_on
     assert without_modifier_rims(area, [box(30, 0, 40, 10)], lw) is area  # no overlap: as it was
 
 
+def test_an_opening_survives_a_mitred_buffer_that_crosses_itself():
+    """Random regions 35 (CuraEngine 5.0): GEOS grew this piece of an infill area's shrunk core back into
+    a polygon that crosses itself near (106.2, 120.5), and the overlay with the area raised a
+    TopologyException: the layer failed and kept Cura's infill."""
+    from shapely import wkt
+
+    from DelaunayInfill.gcode.area import _opened
+
+    piece = wkt.loads(
+        "POLYGON ((106.09195151130308 120.97865749386347, 106.0919388572774 120.96153659711818, "
+        "106.09330515830628 120.95464110660598, 106.12051050032345 120.88882405344144, "
+        "106.13965757206219 120.86012253610966, 106.20056461910735 120.7129211830205, "
+        "106.2005954266246 120.62075389692517, 106.20591264746413 120.62075757666277, "
+        "106.20598981214589 120.50925461153128, 106.20736598018155 120.50236108344751, "
+        "106.25010760846709 120.3993753057934, 106.24805219849382 120.39852226014911, "
+        "106.27765489050012 120.33330616980791, 106.29080489342758 120.20069400766674, "
+        "106.27010722920456 120.11166717121847, 106.26194255283951 120.07048393204936, 106.2619873045424 120, "
+        "105.7 120, 105.7 121, 106.08771430939998 121, 106.09195151130308 120.97865749386347))")
+    lw = 0.1840588017455287 / 0.45  # (the slice's opening radius, 0.45 line widths)
+    opened = _opened(MultiPolygon([piece]), lw)
+    assert opened.is_valid and 0.9 * piece.area < opened.area <= piece.area + 1e-9
+
+
 def test_the_header_tells_curaengine_s_version():
     from DelaunayInfill.gcode.read import read_header
 

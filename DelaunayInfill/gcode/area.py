@@ -213,7 +213,7 @@ def _grown_back(area, shrunk, radius: float, mitre_limit: float = 4.0):
     """`shrunk` (`area` shrunk by `radius`, mitred) grown back inside `area`: the opening's second half."""
     if shrunk.is_empty:
         return empty_area()
-    grown = to_multipolygon(shrunk.buffer(radius, join_style=2, mitre_limit=mitre_limit).intersection(area))
+    grown = to_multipolygon(_mitred_grown(shrunk, radius, mitre_limit).intersection(area))
     cores = polygons_of(shrunk)
     if len(cores) < 2:
         return grown
@@ -225,7 +225,7 @@ def _grown_back(area, shrunk, radius: float, mitre_limit: float = 4.0):
         owner[contains_xy(piece, inside[:, 0], inside[:, 1])] = k
     if len(np.unique(owner)) == len(cores):
         return grown
-    backs = [c.buffer(radius, join_style=2, mitre_limit=mitre_limit) for c in cores]
+    backs = [_mitred_grown(c, radius, mitre_limit) for c in cores]
     lo_x, lo_y, hi_x, hi_y = np.array([b.bounds for b in backs]).T
     pair = ((owner[:, None] == owner[None]) & (lo_x[:, None] <= hi_x[None]) & (lo_x[None] <= hi_x[:, None])
             & (lo_y[:, None] <= hi_y[None]) & (lo_y[None] <= hi_y[:, None]))
@@ -234,6 +234,14 @@ def _grown_back(area, shrunk, radius: float, mitre_limit: float = 4.0):
     if not meets:
         return grown
     return to_multipolygon(grown.difference(unary_union(meets).buffer(_EPS, 4)))
+
+
+def _mitred_grown(shape, radius: float, mitre_limit: float):
+    """`shape` grown by `radius` with mitred joins, valid: GEOS can return a mitred buffer that crosses
+    itself where two sharp corners' spikes meet, and an overlay with it then fails (random regions 35,
+    CuraEngine 5.0: "TopologyException: found non-noded intersection", a failed layer)."""
+    grown = shape.buffer(radius, join_style=2, mitre_limit=mitre_limit)
+    return grown if grown.is_valid else grown.buffer(0)
 
 
 def _without_necks(area, line_width: float):

@@ -1147,15 +1147,15 @@ class _Run:
         out: dict[str, _Nesting] = {}
         for outer, outer_part in parts.items():
             grown = self._grown(outer_part, steps[outer].line_width)
+            fills = [c.geo.fill for c in children_of[outer] if len(c.geo.fill)]
+            fill = np.concatenate(fills) if fills else None
+            middle = fill.mean(axis=1) if fill is not None else None
             for inner, inner_part in parts.items():
                 if inner == outer or inner_part.difference(grown).area > 0.1 * inner_part.area:
                     continue
                 out.setdefault(outer, _Nesting()).inner_parts.append(inner_part)
-                fill = [c.geo.fill for c in children_of[outer] if len(c.geo.fill)]
-                if not fill:
+                if fill is None:
                     continue
-                fill = np.concatenate(fill)
-                middle = fill.mean(axis=1)
                 inside = fill[contains_xy(inner_part, middle[:, 0], middle[:, 1])]
                 if len(inside):
                     nest = out.setdefault(inner, _Nesting())

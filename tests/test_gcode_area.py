@@ -29,7 +29,7 @@ from shapely.geometry import LineString, MultiLineString, MultiPoint, MultiPolyg
 from shapely.ops import polygonize, unary_union
 
 from DelaunayInfill.gcode import ProcessSettings, process
-from DelaunayInfill.gcode.area import closed_loops, median_of, mesh_layer, sample_segments, without_foreign
+from DelaunayInfill.gcode.area import closed_loops, median_of, mesh_layer, piece_centres, sample_segments, without_foreign
 from DelaunayInfill.gcode.infer import nearest_sample_distance
 from DelaunayInfill.gcode.read import (
     WALL_INNER,
@@ -689,3 +689,27 @@ def test_the_header_tells_curaengine_s_version():
     assert read_header(";FLAVOR:Griffin\n;GENERATOR.NAME:Cura_SteamEngine\n;GENERATOR.VERSION:5.7.2\n"
                        ).engine_version == (5, 7)
     assert read_header(";FLAVOR:Marlin\n;Generated with Cura_SteamEngine master\n").engine_version is None
+
+
+def test_piece_centres_count_a_line_clipped_at_the_border_whole():
+    """Lines clipped to a strip 0.85 mm wide (a cup's wall between its walls) end on its border: the
+    pieces' centres lie inside and their lengths sum to the lines' length; samples that include the ends
+    (`sample_segments`) put two of a short line's few samples on the border."""
+    strip = box(0.0, 0.0, 60.0, 0.85)
+    angles = np.linspace(0.3, 2.8, 40)
+    x0 = np.linspace(2.0, 58.0, 40)
+    long_lines = np.stack([np.c_[x0 - 3 * np.cos(angles), -3 * np.sin(angles)],
+                           np.c_[x0 + 3 * np.cos(angles), 3 * np.sin(angles)]], axis=1)
+    clipped = MultiLineString([s.tolist() for s in long_lines]).intersection(strip)
+    segments = np.array([np.asarray(g.coords) for g in clipped.geoms])
+    length = float(np.hypot(*(segments[:, 1] - segments[:, 0]).T).sum())
+    centres, lengths = piece_centres(segments, 0.2)
+    assert lengths.sum() == pytest.approx(length)
+    core = strip.buffer(-1e-9)
+    assert all(core.contains(Point(p)) for p in centres.tolist())
+    # what the ends-included samples say of the same lines (weighted as the report weighted them)
+    samples = sample_segments(segments, 0.2)
+    n = np.maximum(1, np.ceil(np.hypot(*(segments[:, 1] - segments[:, 0]).T) / 0.2)).astype(int) + 1
+    weight = np.repeat(np.hypot(*(segments[:, 1] - segments[:, 0]).T) / n, n)
+    on_ends = ~np.array([core.contains(Point(p)) for p in samples.tolist()])
+    assert weight[~on_ends].sum() < 0.8 * length  # the bias the report had: a fifth and more of the length

@@ -44,6 +44,7 @@ __all__ = [
     "runs_of",
     "fill_hull",
     "fraction_inside",
+    "piece_centres",
     "sample_segments",
     "segments_of",
     "direction_peaks",
@@ -364,6 +365,37 @@ def segment_samples(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.n
     offsets = np.arange(seg.size) - np.repeat(np.cumsum(n + 1) - (n + 1), n + 1)
     t = offsets / np.repeat(n, n + 1)
     return segments[seg, 0] + d[seg] * t[:, None], seg
+
+
+def piece_centres(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each segment cut into equal pieces at most `step` long: the pieces' centres and lengths.
+
+    A length measured by which centres lie in an area counts a segment that ends on the area's border
+    (a clipped line) whole; samples on its ends would fall on the border, in or out by rounding.
+
+    Parameters
+    ----------
+    segments : ndarray, shape (k, 2, 2)
+        mm.
+    step : float
+        mm.
+
+    Returns
+    -------
+    centres : ndarray, shape (p, 2)
+        mm.
+    lengths : ndarray, shape (p,)
+        mm; they sum to the segments' length.
+    """
+    if len(segments) == 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    d = segments[:, 1] - segments[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    n = np.maximum(1, np.ceil(length / step).astype(np.int64))
+    seg = np.repeat(np.arange(len(segments)), n)
+    index = np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n)
+    t = (index + 0.5) / n[seg]
+    return segments[seg, 0] + d[seg] * t[:, None], (length / n)[seg]
 
 
 def fraction_inside(segments: np.ndarray, area, step: float) -> float:

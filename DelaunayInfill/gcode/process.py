@@ -37,6 +37,7 @@ from .area import (
     closed_loops,
     fraction_inside,
     mesh_layer,
+    piece_centres,
     sample_segments,
     segments_of,
     without_foreign,
@@ -1719,12 +1720,7 @@ class _Run:
         steps = np.ones(len(points) - 1, dtype=bool)  # point i to i + 1, but from one path to the next
         steps[np.cumsum([len(p) for p in paths[:-1]], dtype=np.int64) - 1] = False
         segs = np.stack([points[:-1][steps], points[1:][steps]], axis=1)
-        step = max(lw / 2, 0.1)
-        d = segs[:, 1] - segs[:, 0]
-        seg_len = np.hypot(d[:, 0], d[:, 1])
-        n = np.maximum(1, np.ceil(seg_len / step).astype(np.int64)) + 1
-        pts = sample_segments(segs, step)
-        weight = np.repeat(seg_len / n, n)
+        pts, weight = piece_centres(segs, max(lw / 2, 0.1))  # (not the ends: a clipped line ends on the border)
         owner = np.full(len(pts), len(zones))  # len(zones): in no zone
         for k, zone in enumerate(zones):
             free = owner == len(zones)

@@ -42,11 +42,21 @@ def _slice(cache: EverydaySliceCache, case, density, version) -> EverydaySlice:
         pytest.fail(f"CuraEngine {version} cannot slice {case.name} at {density} %: {exc}", pytrace=False)
 
 
+#: the most the density the pass reports for a region may miss its target by, as a fraction (issue 15's 2 points)
+REPORTED_DENSITY_TOLERANCE = 0.02
+
+
 @pytest.mark.parametrize("case, density, version", PARAMETERS)
 def test_everyday(everyday_slices, case, density, version):
+    """The checker's findings, and the density the pass tells the user: within 2 points of the target for
+    every region (it counted a line that ends on the area's border short by its end samples, which fall
+    on the border: the cup's 4 mm wall printed 38.5 % for 40 % and was reported 36.4 %)."""
     sliced = _slice(everyday_slices, case, density, version)
     _, report, result = process_and_check(sliced)
     print(f"\n[everyday] {report_row(sliced, report, result)}")
+    for r in report.regions:
+        if r.target > 0 and abs(r.measured - r.target) > REPORTED_DENSITY_TOLERANCE:
+            result.add_problem(f"density: {r.name} reported {100 * r.measured:.2f} % for {100 * r.target:.2f} %")
     if not result.ok:
         pytest.fail(
             f"{case.name} at {density} % with CuraEngine {version}: {case.exercises}\n"

@@ -9,8 +9,9 @@
   number of open chains therefore equals the lower bound (odd vertices / 2);
   closed loops come on top.  Chains are read off by pointer jumping (list
   ranking), without a Python loop over segments.
-* `order_paths` orders (and flips) chains to keep travel short: greedy
-  nearest end, then 2-opt and or-opt, counting the travel to a given end.
+* `order_paths` orders (and flips) chains to keep travel short: the
+  shortest route for a few, else routes from `first_routes` improved by
+  2-opt and or-opt, counting the travel to a given end.
 * `plan_runs` shares one ordered route among blocks that must start and end
   at given points (Cura's FILL blocks of a layer), cutting it where the least
   travel is added (`route_cuts`, dynamic programming); `TravelCost` prices a
@@ -24,6 +25,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .first_routes import distance_or_zero, nearest_end_route, shortest_links_route, shortest_route
 from .geometry import boundary_segments, contains_xy
 
 __all__ = ["clip_segments", "chain_segments", "order_paths", "travel_length", "odd_vertex_count", "TravelCost",
@@ -32,6 +34,8 @@ __all__ = ["clip_segments", "chain_segments", "order_paths", "travel_length", "o
 _EPS = 1e-9
 _QUANTUM = 1e-5  # mm: endpoints closer than this are one vertex
 _OR_OPT_MOST = 5000  # order_paths: or-opt on routes of at most this many paths
+_EXACT_MOST = 9  # order_paths: routes of at most this many paths are the shortest (`shortest_route`, ~1 ms)
+_TWO_STARTS_MOST = 32  # ... of at most this many also start from the shortest links (the shorter is kept)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -302,13 +306,19 @@ def order_paths(
 ) -> tuple[list[np.ndarray], float]:
     """Order and orient paths to keep travel between them short.
 
-    Greedy nearest end first, then rounds of 2-opt: reversing a run of paths
-    (each flipped) changes only the two travels at its ends, so every move
-    (run start x run length up to `window`) is scored at once, and the best
-    non-touching moves are applied together.  Greedy order leaves mostly
+    Up to `_EXACT_MOST` paths the route is the shortest (`first_routes.shortest_route`).
+    Beyond, greedy nearest end first, then rounds of 2-opt: reversing a run of
+    paths (each flipped) changes only the two travels at its ends, so every
+    move (run start x run length up to `window`) is scored at once, and the
+    best non-touching moves are applied together.  Greedy order leaves mostly
     local detours; the window keeps a round linear in the number of paths.
     Then or-opt (`_or_opt`: single paths moved into better gaps) and 2-opt
-    once more.
+    once more.  Up to `_TWO_STARTS_MOST` paths the same improvement also runs
+    from the shortest links first (`first_routes.shortest_links_route`), and
+    the shorter route is kept: nearest end first strands short paths that a
+    route must come back for, and local moves rarely undo that (on the
+    everyday models' routes of 10-32 paths the two starts travel about 5 %
+    less than one: `bench/bench_routes.py`).
 
     Parameters
     ----------
@@ -319,8 +329,8 @@ def order_paths(
         Where the nozzle goes after the last path (the next feature's start): the travel there
         counts too.
     rounds : int
-        2-opt rounds at most (0: greedy only); they stop early when a round
-        saves less than 0.2 % of the travel.
+        2-opt rounds at most (0: nearest end first only, whatever the count);
+        they stop early when a round saves less than 0.2 % of the travel.
     window : int
         Longest run of paths a 2-opt move reverses.
 
@@ -333,48 +343,48 @@ def order_paths(
     n = len(paths)
     if n == 0:
         return [], 0.0
-    # Row j < n is the head of path j, row n + j its tail; a printed path's
-    # ends move to infinity.
+    # Row j < n is the head of path j, row n + j its tail.
     ends = np.concatenate([[p[0] for p in paths], [p[-1] for p in paths]])
-    x, y = ends[:, 0].copy(), ends[:, 1].copy()
-    points = ends.tolist()
-    hx, hy = (float(v) for v in start) if start is not None else points[0]
-    order = np.zeros(n, dtype=np.int64)
-    flipped = np.zeros(n, dtype=bool)
-    d2, dy = np.empty(2 * n), np.empty(2 * n)
-    for k in range(n):
-        # squared distance to every free end, written in place (the loop is short; its calls add up)
-        np.subtract(x, hx, out=d2)
-        np.multiply(d2, d2, out=d2)
-        np.subtract(y, hy, out=dy)
-        np.multiply(dy, dy, out=dy)
-        d2 += dy
-        j = int(d2.argmin())
-        i = j % n
-        x[i] = x[i + n] = np.inf
-        order[k], flipped[k] = i, j >= n
-        hx, hy = points[i] if j >= n else points[i + n]
     # Path ends as complex numbers: gathers on 1-D arrays and abs() (numpy's hypot) keep a round cheap.
     ends_c = ends[:, 0] + 1j * ends[:, 1]
-    entry = np.where(flipped, ends_c[order + n], ends_c[order])
-    exit_ = np.where(flipped, ends_c[order], ends_c[order + n])
-    origin = complex(*np.asarray(start, dtype=float)) if start is not None else entry[0]
+    origin = complex(*np.asarray(start, dtype=float)) if start is not None else complex(np.nan, np.nan)
     terminus = complex(*np.asarray(end, dtype=float)) if end is not None else complex(np.nan, np.nan)
-    if n >= 2 and rounds > 0:
-        moves = _moves(n, window, start is not None)
-        _two_opt(entry, exit_, order, flipped, origin, moves, rounds, terminus)
-        # (then 2-opt again: a moved path opens new reversals)
-        if n <= _OR_OPT_MOST and _or_opt(entry, exit_, order, flipped,
-                                         origin if start is not None else complex(np.nan, np.nan), terminus, rounds,
-                                         near_paths(ends, n)):
-            _two_opt(entry, exit_, order, flipped, origin if start is not None else entry[0], moves, rounds, terminus)
-    out = [paths[i][::-1] if f else paths[i] for i, f in zip(order, flipped)]
-    travel = float(np.abs(entry[1:] - exit_[:-1]).sum())
-    if start is not None:
-        travel += float(abs(entry[0] - origin))
-    if end is not None:
-        travel += float(abs(terminus - exit_[-1]))
-    return out, travel
+    if rounds > 0 and n <= _EXACT_MOST:
+        firsts = [shortest_route(ends_c, origin, terminus)]
+    else:
+        firsts = [nearest_end_route(ends, start)]
+        if rounds > 0 and n <= _TWO_STARTS_MOST:
+            firsts.append(shortest_links_route(ends_c, origin, terminus))
+    near = near_paths(ends, n) if n > _EXACT_MOST and rounds > 0 and n <= _OR_OPT_MOST else None
+    best = None
+    for order, flipped in firsts:
+        entry = np.where(flipped, ends_c[order + n], ends_c[order])
+        exit_ = np.where(flipped, ends_c[order], ends_c[order + n])
+        if n > _EXACT_MOST and rounds > 0:
+            _improve(entry, exit_, order, flipped, origin, terminus, near, rounds, window)
+        travel = float(distance_or_zero(entry[1:], exit_[:-1]).sum() + distance_or_zero(entry[0], origin)
+                       + distance_or_zero(terminus, exit_[-1]))
+        if best is None or travel < best[0] - 1e-9:
+            best = (travel, order, flipped)
+    travel, order, flipped = best
+    return [paths[i][::-1] if f else paths[i] for i, f in zip(order.tolist(), flipped.tolist())], travel
+
+
+def _improve(entry: np.ndarray, exit_: np.ndarray, order: np.ndarray, flipped: np.ndarray, origin: complex,
+             terminus: complex, near: np.ndarray | None, rounds: int, window: int) -> None:
+    """2-opt, then or-opt and 2-opt again when or-opt moved a path (it opens new reversals), in place.
+
+    Arrays as in `_two_opt`; `origin` / `terminus` complex, NaN: none; `near` the paths near each
+    (`near_paths`; None: no or-opt).
+    """
+    n = len(order)
+    if n < 2:
+        return
+    with_start = not np.isnan(origin)
+    moves = _moves(n, window, with_start)
+    _two_opt(entry, exit_, order, flipped, origin if with_start else entry[0], moves, rounds, terminus)
+    if near is not None and _or_opt(entry, exit_, order, flipped, origin, terminus, rounds, near):
+        _two_opt(entry, exit_, order, flipped, origin if with_start else entry[0], moves, rounds, terminus)
 
 
 _MOVES: dict[tuple, tuple] = {}  # (paths, window, with a start) -> the 2-opt moves (`_moves`)
@@ -417,8 +427,8 @@ def _two_opt(entry: np.ndarray, exit_: np.ndarray, order: np.ndarray, flipped: n
         # (exit[j] -> entry[j+1]) into (exit[i-1] -> exit[j]) and (entry[i] -> entry[j+1]).
         before = np.where(after_first, exit_[prev], origin)
         following = np.where(last, terminus, entry[nxt])
-        old = np.abs(entry[i] - before) + _gap_distance(following, exit_[j])
-        new = np.abs(exit_[j] - before) + _gap_distance(following, entry[i])
+        old = np.abs(entry[i] - before) + distance_or_zero(following, exit_[j])
+        new = np.abs(exit_[j] - before) + distance_or_zero(following, entry[i])
         gain = np.where(valid, old - new, -np.inf)
         best = gain.argmax(axis=1)
         best_gain = gain[rows, best]
@@ -441,12 +451,6 @@ def _two_opt(entry: np.ndarray, exit_: np.ndarray, order: np.ndarray, flipped: n
             flipped[run] = ~flipped[run][::-1]
         if saved < 2e-3 * float(np.abs(entry[1:] - exit_[:-1]).sum()):
             break
-
-
-def _gap_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """|a - b| of complex points, 0 where either is unknown (NaN: no start, no end to reach)."""
-    d = np.abs(a - b)
-    return np.where(np.isnan(d), 0.0, d)
 
 
 _NEAR_PATHS = 6  # or-opt: each path tries the gaps beside the paths with an end among this many nearest to its ends
@@ -499,18 +503,19 @@ def _or_opt(entry: np.ndarray, exit_: np.ndarray, order: np.ndarray, flipped: np
     if n < 3:
         return False
     rows = np.arange(n)
+    at_origin, at_terminus = np.array([origin]), np.array([terminus])
     moved_any = False
     for _ in range(rounds):
-        before = np.r_[origin, exit_[:-1]]  # (n,) the end each position is reached from
-        after = np.r_[entry[1:], terminus]  # (n,) where each position's path goes next
-        taken_out = _gap_distance(before, entry) + _gap_distance(exit_, after) - _gap_distance(before, after)
-        left = np.r_[origin, exit_]  # (n + 1,) gap g lies between position g - 1 and g
-        right = np.r_[entry, terminus]
+        left = np.concatenate((at_origin, exit_))  # (n + 1,) gap g lies between position g - 1 and g
+        right = np.concatenate((entry, at_terminus))
+        before, after = left[:-1], right[1:]  # (n,) the end each position is reached from, and goes to
+        taken_out = (distance_or_zero(before, entry) + distance_or_zero(exit_, after)
+                     - distance_or_zero(before, after))
         gaps = _near_gaps(order, near)  # (n, c) candidate gaps of each position's path
         lg, rg = left[gaps], right[gaps]
-        open_gap = _gap_distance(lg, rg)
-        forward = _gap_distance(lg, entry[:, None]) + _gap_distance(exit_[:, None], rg)
-        backward = _gap_distance(lg, exit_[:, None]) + _gap_distance(entry[:, None], rg)
+        open_gap = distance_or_zero(lg, rg)
+        forward = distance_or_zero(lg, entry[:, None]) + distance_or_zero(exit_[:, None], rg)
+        backward = distance_or_zero(lg, exit_[:, None]) + distance_or_zero(entry[:, None], rg)
         gain = taken_out[:, None] - (np.minimum(forward, backward) - open_gap)
         gain[(gaps == rows[:, None]) | (gaps == rows[:, None] + 1)] = -np.inf  # next to the path itself: no move
         pick = gain.argmax(axis=1)
@@ -545,7 +550,8 @@ def _or_opt(entry: np.ndarray, exit_: np.ndarray, order: np.ndarray, flipped: np
         order[:] = order[at]
         flipped[:] = flipped[at] ^ turn
         moved_any = True
-        if saved < 2e-3 * float(_gap_distance(np.r_[origin, exit_], np.r_[entry, terminus]).sum()):
+        left, right = np.concatenate((at_origin, exit_)), np.concatenate((entry, at_terminus))
+        if saved < 2e-3 * float(distance_or_zero(left, right).sum()):
             break
     return moved_any
 

@@ -20,12 +20,26 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["shortest_route", "nearest_end_route", "shortest_links_route"]
+__all__ = ["shortest_route", "nearest_end_route", "shortest_links_route", "route_ends", "route_travel"]
 
 
 def distance_or_zero(a, b) -> np.ndarray:
     """|a - b| of complex points, 0 where either is NaN (no start, no end to reach)."""
     return np.fmax(np.abs(a - b), 0.0)  # (fmax takes the number where the other is NaN)
+
+
+def route_ends(ends: np.ndarray, order: np.ndarray, flipped: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each position of a route enters its path and where it leaves it, each shape (n,) complex."""
+    n = len(order)
+    entry = np.where(flipped, ends[order + n], ends[order])
+    leave = np.where(flipped, ends[order], ends[order + n])
+    return entry, leave
+
+
+def route_travel(entry: np.ndarray, leave: np.ndarray, origin: complex, terminus: complex) -> float:
+    """The straight travel of a route (`route_ends`): from `origin`, between its paths, to `terminus`, mm."""
+    return float(distance_or_zero(entry[1:], leave[:-1]).sum() + distance_or_zero(entry[0], origin)
+                 + distance_or_zero(terminus, leave[-1]))
 
 
 @lru_cache(maxsize=16)
@@ -57,10 +71,6 @@ def shortest_route(ends: np.ndarray, origin: complex, terminus: complex) -> tupl
     """
     count = len(ends)
     n = count // 2
-    if n == 1:
-        turn = distance_or_zero(ends[1], origin) + distance_or_zero(terminus, ends[0]) < (
-            distance_or_zero(ends[0], origin) + distance_or_zero(terminus, ends[1]))
-        return np.zeros(1, dtype=np.int64), np.array([bool(turn)])
     leave = np.r_[ends[n:], ends[:n]]  # entered at end k, the path is left at its other end
     hop = np.abs(ends[None, :] - leave[:, None])  # (2n, 2n): left after entering at a -> entering at b
     into = hop.T[None]  # (1, b, a)

@@ -25,7 +25,8 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .first_routes import distance_or_zero, nearest_end_route, shortest_links_route, shortest_route
+from .first_routes import (distance_or_zero, nearest_end_route, route_ends, route_travel, shortest_links_route,
+                           shortest_route)
 from .geometry import boundary_segments, contains_xy
 
 __all__ = ["clip_segments", "chain_segments", "order_paths", "travel_length", "odd_vertex_count", "TravelCost",
@@ -358,12 +359,10 @@ def order_paths(
     near = near_paths(ends, n) if n > _EXACT_MOST and rounds > 0 and n <= _OR_OPT_MOST else None
     best = None
     for order, flipped in firsts:
-        entry = np.where(flipped, ends_c[order + n], ends_c[order])
-        exit_ = np.where(flipped, ends_c[order], ends_c[order + n])
+        entry, exit_ = route_ends(ends_c, order, flipped)
         if n > _EXACT_MOST and rounds > 0:
             _improve(entry, exit_, order, flipped, origin, terminus, near, rounds, window)
-        travel = float(distance_or_zero(entry[1:], exit_[:-1]).sum() + distance_or_zero(entry[0], origin)
-                       + distance_or_zero(terminus, exit_[-1]))
+        travel = route_travel(entry, exit_, origin, terminus)
         if best is None or travel < best[0] - 1e-9:
             best = (travel, order, flipped)
     travel, order, flipped = best

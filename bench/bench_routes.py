@@ -34,7 +34,7 @@ from bench_everyday import DEFAULT_MODELS, slice_case  # noqa: E402
 from bench_gcode import gcode_stats  # noqa: E402
 
 from DelaunayInfill import pattern, routing  # noqa: E402
-from DelaunayInfill.first_routes import shortest_route  # noqa: E402
+from DelaunayInfill.first_routes import route_ends, route_travel, shortest_route  # noqa: E402
 from DelaunayInfill.gcode import ProcessSettings, process_gcode  # noqa: E402
 from DelaunayInfill.gcode import process as process_module  # noqa: E402
 from DelaunayInfill.gcode.read import as_cura_list  # noqa: E402
@@ -76,16 +76,12 @@ def process(layers: list[str], repeats: int, record: list | None = None) -> tupl
 
 
 def shortest_travel(paths, start, end) -> float:
-    n = len(paths)
+    """The straight travel of the shortest route through `paths` (as `order_paths` is given them), mm."""
     ends = np.array([p[0] for p in paths] + [p[-1] for p in paths], dtype=float)
     ends = ends[:, 0] + 1j * ends[:, 1]
     origin = complex(*start) if start is not None else complex(np.nan, np.nan)
     terminus = complex(*end) if end is not None else complex(np.nan, np.nan)
-    order, flipped = shortest_route(ends, origin, terminus)
-    entry = np.where(flipped, ends[order + n], ends[order])
-    leave = np.where(flipped, ends[order], ends[order + n])
-    hops = np.r_[entry[0] - origin, entry[1:] - leave[:-1], terminus - leave[-1]]
-    return float(np.nansum(np.abs(hops)))
+    return route_travel(*route_ends(ends, *shortest_route(ends, origin, terminus)), origin, terminus)
 
 
 def main(argv=None) -> int:

@@ -31,8 +31,9 @@ written as repeats of an earlier one (gcode/replay.py), the rest.
 
 Usage::
 
-    python3 bench/bench_gcode.py [--density PCT] [--models cube,hbracket,star,star_regions] [--out DIR] [--stages]
-                                 [--height MM]   # every model that tall (more layers)
+    python3 bench/bench_gcode.py [--density PCT] [--models cube,hbracket,star,star_regions,hbracket_box]
+                                 [--out DIR] [--stages]
+                                 [--height MM]   # every model that tall (more layers; not hbracket_box, the demo's)
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ import argparse
 import os
 import re
 import resource
+import shutil
 import statistics
 import sys
 import tempfile
@@ -49,6 +51,7 @@ import time
 import numpy as np
 
 from DelaunayInfill import curaengine, models
+from DelaunayInfill.gcode.demo import DATA_DIR
 from DelaunayInfill.gcode.estimate import DEFAULT_JERK, move_seconds
 
 PATTERNS = ("grid", "triangles", "lines")
@@ -85,12 +88,19 @@ def _model_files(folder: str, height: float | None = None) -> dict[str, list]:
         models.write_stl(path, tris, name=name)
         percent = 100 * models.STAR_FIGURE10_DENSITIES[name]
         regions.append((path, curaengine.infill_modifier_settings(percent)))
+    # the demo's H-bracket with its 60 % infill-mesh box (the bundled STLs, their own height)
+    demo = {}
+    for stl in ("hbracket.stl", "hbracket_box.stl"):
+        demo[stl] = os.path.join(folder, f"demo_{stl}")
+        shutil.copyfile(os.path.join(DATA_DIR, stl), demo[stl])
     return {
         "cube": [(paths["cube"], {})],
         "hbracket": [(paths["hbracket"], {})],
         "star": [(paths["star"], {})],
         # the paper's Figure 10: five tips and the centre as infill_mesh modifiers
         "star_regions": [(paths["star"], {}), *regions],
+        "hbracket_box": [(demo["hbracket.stl"], {}),
+                         (demo["hbracket_box.stl"], curaengine.infill_modifier_settings(60))],
     }
 
 
@@ -293,7 +303,7 @@ def _engine_version() -> str:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--density", type=float, default=20.0, help="infill density in percent (default 20)")
-    parser.add_argument("--models", default="cube,hbracket,star,star_regions")
+    parser.add_argument("--models", default="cube,hbracket,star,star_regions,hbracket_box")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", default=None, help="keep the G-code files in this folder")
     parser.add_argument("--stages", action="store_true", help="also time the pipeline's stages (one extra run)")

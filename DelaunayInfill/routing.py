@@ -356,11 +356,12 @@ def order_paths(
         firsts = [nearest_end_route(ends, start)]
         if rounds > 0 and n <= _TWO_STARTS_MOST:
             firsts.append(shortest_links_route(ends_c, origin, terminus))
-    near = near_paths(ends, n) if n > _EXACT_MOST and rounds > 0 and n <= _OR_OPT_MOST else None
+    improve = rounds > 0 and n > _EXACT_MOST  # (a shortest route needs no improving)
+    near = near_paths(ends, n) if improve and n <= _OR_OPT_MOST else None
     best = None
     for order, flipped in firsts:
         entry, exit_ = route_ends(ends_c, order, flipped)
-        if n > _EXACT_MOST and rounds > 0:
+        if improve:
             _improve(entry, exit_, order, flipped, origin, terminus, near, rounds, window)
         travel = route_travel(entry, exit_, origin, terminus)
         if best is None or travel < best[0] - 1e-9:
@@ -549,8 +550,7 @@ def _or_opt(entry: np.ndarray, exit_: np.ndarray, order: np.ndarray, flipped: np
         order[:] = order[at]
         flipped[:] = flipped[at] ^ turn
         moved_any = True
-        left, right = np.concatenate((at_origin, exit_)), np.concatenate((entry, at_terminus))
-        if saved < 2e-3 * float(distance_or_zero(left, right).sum()):
+        if saved < 2e-3 * route_travel(entry, exit_, origin, terminus):
             break
     return moved_any
 

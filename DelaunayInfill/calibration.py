@@ -31,6 +31,7 @@ import numpy as np
 from scipy.spatial import QhullError
 
 from .metering import RasterMeter, ZoneMeter, border_bands
+from .sampling import close_pairs, greedy_independent_set
 from .triangulation import canonical_triangles, delaunay_triangles, growing_delaunay
 
 __all__ = ["TOLERANCE", "balance_zones", "edge_cache", "fine_tune_scale", "paper_choices", "scale_limit",
@@ -251,7 +252,7 @@ def balance_zones(points: np.ndarray, triangles: np.ndarray, meter: ZoneMeter | 
             (sa * (c[:, 0] - b[:, 0]) + sb * (a[:, 0] - c[:, 0]) + sc * (b[:, 0] - a[:, 0])) / d,
         ), axis=1)
         radius = np.where(ok, np.hypot(*(center - a).T), 0.0)
-        added = []
+        added, added_radius = [], []
         for k in short:
             inside = meter.contains(k, center)  # ascending, as flatnonzero of the full test
             if inside.size == 0:
@@ -262,9 +263,10 @@ def balance_zones(points: np.ndarray, triangles: np.ndarray, meter: ZoneMeter | 
             widest = inside[np.argsort(-radius[inside])]
             count = int(np.clip(missing / max(3.0 * radius[widest[0]], 1e-9), 1, max(1, inside.size // 3)))
             added.append(center[widest[:count]])
+            added_radius.append(radius[widest[:count]])
         if not added:
             break
-        added = np.concatenate(added)
+        added = _apart_centres(np.concatenate(added), np.concatenate(added_radius))
         triangles = None
         if growing is None:
             growing = growing_delaunay(points)
@@ -282,6 +284,20 @@ def balance_zones(points: np.ndarray, triangles: np.ndarray, meter: ZoneMeter | 
             return points, triangles, segments, measured
     _, _, points, triangles, segments, measured = best
     return points, triangles, segments, measured
+
+
+def _apart_centres(centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """The circumcentres (k, 2) mm to insert, none within half its circumradius (k,) of one before it.
+
+    Two neighbouring triangles that are nearly cocircular have nearly the same circumcentre: both
+    inserted, they make an edge far shorter than the spacing (a 0.48 mm edge among 40 % samples,
+    whose spacing is 3.5 mm).  The centres come widest first within each zone; an earlier one wins.
+    (No existing sample lies that close: a Delaunay circumcircle is empty.)
+    """
+    if len(centres) < 2:
+        return centres
+    a, b = close_pairs(centres, 0.5 * radii)
+    return centres[greedy_independent_set(len(centres), a, b, np.arange(len(centres), dtype=float))]
 
 
 def _shortfall(measured, targets, small) -> tuple[list, float]:

@@ -24,8 +24,10 @@ Three samplers:
     orientation and offset hashed from the seed, anchored at the origin)
     wherever the radius is constant: with a constant radius the lattice is
     the whole sampling; with a variable one each radius keeps its lattice a
-    radius short of where the radius changes, and ``fast``'s candidates
-    (after the lattice points in priority) fill the bands between.  The
+    radius short of where the radius changes (a zone only a few lattice sides
+    across: a quarter radius short of a denser zone, whose samples then keep
+    their distance), and ``fast``'s candidates (after the lattice points in
+    priority) fill the bands between.  The
     lattice is a Poisson-disk set (side > r) and maximal (circumradius
     0.72 r < r); its Delaunay triangles are equilateral.
 
@@ -130,7 +132,8 @@ def _radius_range(area, radius_fn) -> tuple[float, float]:
 
 
 # --------------------------------------------------------------------------- conflicts
-def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: np.ndarray | None = None):
+def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: np.ndarray | None = None,
+                cross=None):
     """Index pairs of points closer than the larger of their two radii.
 
     Parameters
@@ -141,11 +144,13 @@ def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: 
     q, rq : ndarray, shape (m, 2) and (m,), optional
         A second set; when omitted, pairs within `p` are returned in both
         each once (i != j).
+    cross : (float, ndarray), optional
+        Radii whose samples may lie closer to denser ones (see `_apart`).
 
     Returns
     -------
     i, j : ndarray of int
-        ``|p[i] - q[j]| < max(rp[i], rq[j])``.
+        ``|p[i] - q[j]| < max(rp[i], rq[j])`` (`_apart` with `cross`).
     """
     same = q is None
     if same:
@@ -154,7 +159,7 @@ def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: 
         return np.zeros(0, np.intp), np.zeros(0, np.intp)
     if len(p) * len(q) <= _ALL_PAIRS:
         # Few points (gap filling's later passes): every distance at once beats building trees.
-        hit = np.hypot(p[:, None, 0] - q[None, :, 0], p[:, None, 1] - q[None, :, 1]) < np.maximum(rp[:, None], rq)
+        hit = np.hypot(p[:, None, 0] - q[None, :, 0], p[:, None, 1] - q[None, :, 1]) < _apart(rp[:, None], rq, cross)
         if same:
             hit &= np.arange(len(p))[:, None] < np.arange(len(p))
         i, j = np.nonzero(hit)
@@ -167,7 +172,7 @@ def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: 
     found_i, found_j = [], []
 
     def keep(ia, jb, d):
-        ok = d < np.maximum(rp[ia], rq[jb])
+        ok = d < _apart(rp[ia], rq[jb], cross)
         found_i.append(ia[ok])
         found_j.append(jb[ok])
 
@@ -199,6 +204,20 @@ def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: 
     if not found_i:
         return np.zeros(0, np.intp), np.zeros(0, np.intp)
     return np.concatenate(found_i).astype(np.intp), np.concatenate(found_j).astype(np.intp)
+
+
+def _apart(ra, rb, cross):
+    """How far apart two samples of radii `ra`, `rb` (mm, broadcast) must be: the larger radius.
+
+    With `cross` = (factor, radii), a sample of one of those radii (a lattice reaching a denser zone,
+    `_lattice_cores`) and one of a smaller radius need only be max(smaller, factor x larger) apart.
+    """
+    if cross is None:
+        return np.maximum(ra, rb)
+    factor, radii = cross
+    hi, lo = np.maximum(ra, rb), np.minimum(ra, rb)
+    near = (hi > lo * (1 + 1e-9)) & np.isin(hi, radii)
+    return np.where(near, np.maximum(lo, factor * hi), hi)
 
 
 def greedy_independent_set(n: int, a: np.ndarray, b: np.ndarray, priority: np.ndarray) -> np.ndarray:
@@ -366,7 +385,8 @@ def _uniform_level(area, spacing: float, radius: float, seed: int) -> np.ndarray
     return np.stack((x[chosen], y[chosen]), axis=1)
 
 
-def _variable_level(area, spacing: float, r_lo: float, radius_fn, seed: int, first=None, info=None):
+def _variable_level(area, spacing: float, r_lo: float, radius_fn, seed: int, first=None, info=None,
+                    cross=None):
     """Greedy independent set of hashed grid candidates, thinned where the radius is larger.
 
     Thinning by (r_min / r)^2 keeps the number of candidates per disk
@@ -384,7 +404,7 @@ def _variable_level(area, spacing: float, r_lo: float, radius_fn, seed: int, fir
         pts = np.concatenate((first, pts))
         r = np.concatenate((radius_fn(first), r))
         priority = np.concatenate((np.arange(len(first)) - float(len(first)), priority))
-    pi, pj = close_pairs(pts, r)
+    pi, pj = close_pairs(pts, r, cross=cross)
     chosen = greedy_independent_set(len(pts), pi, pj, priority)
     if info is not None:
         info["lattice"] = 0 if first is None else int(np.count_nonzero(chosen[: len(first)]))
@@ -403,6 +423,19 @@ _RING_RADII = 1.0  # ... on a ring of this many radii around it
 # 20 % in a 60 % part (about 4 sides across) measured 0.80 of a uniform pattern's C_min / rho with
 # its lattice against 0.74 with Poisson-disk samples (`bench/bench_regions.py`, 3 seeds).
 _LATTICE_AREA = 4.0
+# A zone of 16 to 36 squared radii (a few lattice sides across: most of it lies within a radius of
+# its border) keeps its lattice up to _NEAR_RING radii from a denser zone, not one radius: kept a
+# radius off, its border band held no point of its own, only long edges fanning from its few inner
+# points to the denser zone's border row (a 30 mm region at 20 % in a 60 % part: 9-12 points against
+# about 21 in its lattice, 63-71 % of its lines in pieces reaching its border; C_min / rho 0.80 of a
+# uniform pattern's, 0.87 so, `bench/bench_regions.py --seeds 5`).  Those lattice points are placed
+# first and keep a denser zone's samples only _CROSS of their radius away, so the change of density
+# lies on the denser side.  Larger zones keep the band (a large region's is a small part of it; for
+# all zones the dense regions lost: 0.90 -> 0.89 for 60 % in 20 %, 0.85 -> 0.80 for 40 % in 10 %).
+_NEAR_AREA = 36.0
+_NEAR_MIN = 16.0
+_NEAR_RING = 0.25
+_CROSS = 0.85
 _BETWEEN_SALT = 1_000_003  # another sampling between the lattices: seeds apart from every seed's own
 
 
@@ -439,7 +472,7 @@ def lattice_points(area, side: float, seed: int = 0) -> np.ndarray:
     return pts[contains_xy(area, pts[:, 0], pts[:, 1])]
 
 
-def _lattice_cores(area, radius_fn, r_lo: float, seed: int) -> np.ndarray:
+def _lattice_cores(area, radius_fn, r_lo: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Lattice points in the parts of `area` where the radius is constant (variable radius).
 
     Each radius that holds at least `_LATTICE_AREA` squared radii gets its lattice (side
@@ -447,30 +480,45 @@ def _lattice_cores(area, radius_fn, r_lo: float, seed: int) -> np.ndarray:
     and on a ring of one radius around it: the lattices of two radii end a
     radius short of the border between them each, so they never conflict, and
     Poisson-disk samples fill the band between them.  A radius that varies
-    continuously (a feathered border) holds no lattice.
+    continuously (a feathered border) holds no lattice.  A radius holding
+    `_NEAR_MIN` to `_NEAR_AREA` squared radii keeps its lattice up to `_NEAR_RING`
+    radii from a denser radius (a smaller one); its points come first.
+
+    Returns
+    -------
+    points : ndarray, shape (n, 2)
+        mm.
+    reaching : ndarray, shape (m,)
+        The radii whose lattices reach a denser radius's border (mm), for `_apart`.
     """
     x0, y0, x1, y1 = area.bounds
     step = r_lo
     gx, gy = np.meshgrid(np.arange(x0 + 0.5 * step, x1, step), np.arange(y0 + 0.5 * step, y1, step))
     probe = np.c_[gx.ravel(), gy.ravel()]
     if len(probe) == 0:
-        return np.zeros((0, 2))
+        return np.zeros((0, 2)), np.zeros(0)
     values, counts = np.unique(radius_fn(probe), return_counts=True)
-    values = values[counts * step * step >= _LATTICE_AREA * values * values]  # a continuous radius: none
+    held = counts * step * step / (values * values)  # squared radii of area
+    values, held = values[held >= _LATTICE_AREA], held[held >= _LATTICE_AREA]  # a continuous radius: none
+    reaches = (held >= _NEAR_MIN) & (held < _NEAR_AREA)
     ring = np.exp(2j * np.pi * np.arange(_LATTICE_RING) / _LATTICE_RING)
     ring = np.stack((ring.real, ring.imag), axis=1)
-    out = []
-    for value in values.tolist():
+    first, rest = [], []
+    for value, reaching in zip(values.tolist(), reaches.tolist(), strict=True):
         pts = lattice_points(area, LATTICE_SPACING * value, seed)
         if len(pts) == 0:
             continue
         pts = pts[radius_fn(pts) == value]
         if len(pts) == 0:  # (a radius that only the probes hit exactly)
             continue
-        around = (pts[:, None, :] + _RING_RADII * value * ring[None]).reshape(-1, 2)
-        pts = pts[(radius_fn(around) == value).reshape(len(pts), -1).all(axis=1)]
-        out.append(pts)
-    return np.concatenate(out) if out else np.zeros((0, 2))
+        around = radius_fn((pts[:, None, :] + _RING_RADII * value * ring[None]).reshape(-1, 2)).reshape(len(pts), -1)
+        if reaching:
+            close = radius_fn((pts[:, None, :] + _NEAR_RING * value * ring[None]).reshape(-1, 2))
+            first.append(pts[(around <= value).all(axis=1) & (close == value).reshape(len(pts), -1).all(axis=1)])
+        else:
+            rest.append(pts[(around == value).all(axis=1)])
+    points = np.concatenate(first + rest) if first or rest else np.zeros((0, 2))
+    return points, values[reaches]
 
 
 def _sample_fast(area, radius_fn, seed: int, keep: list | None = None, lattice: bool = False,
@@ -496,10 +544,11 @@ def _sample_fast(area, radius_fn, seed: int, keep: list | None = None, lattice: 
             info["lattice"] = len(seeds)  # gap filling appends after them
             return _fill_gaps_constant(area, seeds, r_lo)
         return _fill_gaps_constant(area, _uniform_level(area, spacing, r_lo, seed), r_lo)
-    first = _lattice_cores(area, radius_fn, r_lo, seed) if lattice else None
+    first, reaching = _lattice_cores(area, radius_fn, r_lo, seed) if lattice else (None, np.zeros(0))
     poisson_seed = seed if between_seed is None else _BETWEEN_SALT * (seed + 1) + between_seed
-    samples, samples_r = _variable_level(area, spacing, r_lo, radius_fn, poisson_seed, first, info)
-    return _fill_gaps_variable(area, samples, samples_r, radius_fn, keep=keep)
+    cross = (_CROSS, reaching) if len(reaching) else None
+    samples, samples_r = _variable_level(area, spacing, r_lo, radius_fn, poisson_seed, first, info, cross)
+    return _fill_gaps_variable(area, samples, samples_r, radius_fn, keep=keep, cross=cross)
 
 
 def sample_lattice(region, radius: RadiusLike, *, seed: int = 0,
@@ -753,7 +802,8 @@ def _fill_gaps_constant(area, samples: np.ndarray, radius: float) -> np.ndarray:
     return samples
 
 
-def _fill_gaps_variable(area, samples, samples_r, radius_fn, passes: int = 6, keep: list | None = None):
+def _fill_gaps_variable(area, samples, samples_r, radius_fn, passes: int = 6, keep: list | None = None,
+                        cross=None):
     """Insert circumcentres of empty circles wider than the radius (variable r).
 
     A Delaunay triangle whose circumradius exceeds the radius at its
@@ -794,13 +844,13 @@ def _fill_gaps_variable(area, samples, samples_r, radius_fn, passes: int = 6, ke
         rc = radius_fn(center)
         gap = radius > rc * (1 + 1e-9)
         center, rc = center[gap], rc[gap]
-        ci, _ = close_pairs(center, rc, samples, samples_r)
+        ci, _ = close_pairs(center, rc, samples, samples_r, cross=cross)
         free = np.ones(len(center), dtype=bool)
         free[ci] = False
         center, rc = center[free], rc[free]
         if len(center) == 0:
             break
-        pi, pj = close_pairs(center, rc)
+        pi, pj = close_pairs(center, rc, cross=cross)
         won = greedy_independent_set(len(center), pi, pj, np.arange(len(center), dtype=float))
         samples = np.r_[samples, center[won]]
         samples_r = np.r_[samples_r, rc[won]]

@@ -133,7 +133,7 @@ def _radius_range(area, radius_fn) -> tuple[float, float]:
 
 # --------------------------------------------------------------------------- conflicts
 def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: np.ndarray | None = None,
-                cross=None):
+                reaching=None):
     """Index pairs of points closer than the larger of their two radii.
 
     Parameters
@@ -144,13 +144,13 @@ def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: 
     q, rq : ndarray, shape (m, 2) and (m,), optional
         A second set; when omitted, pairs within `p` are returned in both
         each once (i != j).
-    cross : (float, ndarray), optional
+    reaching : ndarray, optional
         Radii whose samples may lie closer to denser ones (see `_apart`).
 
     Returns
     -------
     i, j : ndarray of int
-        ``|p[i] - q[j]| < max(rp[i], rq[j])`` (`_apart` with `cross`).
+        ``|p[i] - q[j]| < max(rp[i], rq[j])`` (`_apart` with `reaching`).
     """
     same = q is None
     if same:
@@ -159,7 +159,7 @@ def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: 
         return np.zeros(0, np.intp), np.zeros(0, np.intp)
     if len(p) * len(q) <= _ALL_PAIRS:
         # Few points (gap filling's later passes): every distance at once beats building trees.
-        hit = np.hypot(p[:, None, 0] - q[None, :, 0], p[:, None, 1] - q[None, :, 1]) < _apart(rp[:, None], rq, cross)
+        hit = np.hypot(p[:, None, 0] - q[None, :, 0], p[:, None, 1] - q[None, :, 1]) < _apart(rp[:, None], rq, reaching)
         if same:
             hit &= np.arange(len(p))[:, None] < np.arange(len(p))
         i, j = np.nonzero(hit)
@@ -172,7 +172,7 @@ def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: 
     found_i, found_j = [], []
 
     def keep(ia, jb, d):
-        ok = d < _apart(rp[ia], rq[jb], cross)
+        ok = d < _apart(rp[ia], rq[jb], reaching)
         found_i.append(ia[ok])
         found_j.append(jb[ok])
 
@@ -206,18 +206,17 @@ def close_pairs(p: np.ndarray, rp: np.ndarray, q: np.ndarray | None = None, rq: 
     return np.concatenate(found_i).astype(np.intp), np.concatenate(found_j).astype(np.intp)
 
 
-def _apart(ra, rb, cross):
+def _apart(ra, rb, reaching):
     """How far apart two samples of radii `ra`, `rb` (mm, broadcast) must be: the larger radius.
 
-    With `cross` = (factor, radii), a sample of one of those radii (a lattice reaching a denser zone,
-    `_lattice_cores`) and one of a smaller radius need only be max(smaller, factor x larger) apart.
+    A sample of one of the `reaching` radii (a lattice reaching a denser zone, `_lattice_cores`) and
+    one of a smaller radius need only be max(smaller, `_CROSS` x larger) apart.
     """
-    if cross is None:
+    if reaching is None:
         return np.maximum(ra, rb)
-    factor, radii = cross
     hi, lo = np.maximum(ra, rb), np.minimum(ra, rb)
-    near = (hi > lo * (1 + 1e-9)) & np.isin(hi, radii)
-    return np.where(near, np.maximum(lo, factor * hi), hi)
+    near = (hi > lo * (1 + 1e-9)) & np.isin(hi, reaching)
+    return np.where(near, np.maximum(lo, _CROSS * hi), hi)
 
 
 def greedy_independent_set(n: int, a: np.ndarray, b: np.ndarray, priority: np.ndarray) -> np.ndarray:
@@ -386,7 +385,7 @@ def _uniform_level(area, spacing: float, radius: float, seed: int) -> np.ndarray
 
 
 def _variable_level(area, spacing: float, r_lo: float, radius_fn, seed: int, first=None, info=None,
-                    cross=None):
+                    reaching=None):
     """Greedy independent set of hashed grid candidates, thinned where the radius is larger.
 
     Thinning by (r_min / r)^2 keeps the number of candidates per disk
@@ -404,7 +403,7 @@ def _variable_level(area, spacing: float, r_lo: float, radius_fn, seed: int, fir
         pts = np.concatenate((first, pts))
         r = np.concatenate((radius_fn(first), r))
         priority = np.concatenate((np.arange(len(first)) - float(len(first)), priority))
-    pi, pj = close_pairs(pts, r, cross=cross)
+    pi, pj = close_pairs(pts, r, reaching=reaching)
     chosen = greedy_independent_set(len(pts), pi, pj, priority)
     if info is not None:
         info["lattice"] = 0 if first is None else int(np.count_nonzero(chosen[: len(first)]))
@@ -427,11 +426,14 @@ _LATTICE_AREA = 4.0
 # its border) keeps its lattice up to _NEAR_RING radii from a denser zone, not one radius: kept a
 # radius off, its border band held no point of its own, only long edges fanning from its few inner
 # points to the denser zone's border row (a 30 mm region at 20 % in a 60 % part: 9-12 points against
-# about 21 in its lattice, 63-71 % of its lines in pieces reaching its border; C_min / rho 0.80 of a
+# about 21 in its lattice, 63-71 % of its lines in pieces reaching its border; C_min / rho 0.81 of a
 # uniform pattern's, 0.87 so, `bench/bench_regions.py --seeds 5`).  Those lattice points are placed
 # first and keep a denser zone's samples only _CROSS of their radius away, so the change of density
-# lies on the denser side.  Larger zones keep the band (a large region's is a small part of it; for
-# all zones the dense regions lost: 0.90 -> 0.89 for 60 % in 20 %, 0.85 -> 0.80 for 40 % in 10 %).
+# lies on the denser side.  Larger zones keep the band (a large region's is a small part of it; done
+# for every zone, the dense regions lost: 60 % in 20 % 0.90 -> 0.88-0.90, 40 % in 10 % 0.85 -> 0.80-0.84),
+# and so does a zone that reaches the area's outline, a part's base: in a narrow part of a small one,
+# its lattice reaching the regions put lines across the strip CuraEngine 4.13 leaves empty between an
+# infill mesh and its host (random regions 1: 0.4-0.6 mm of a layer's 20 mm outside Cura's area).
 _NEAR_AREA = 36.0
 _NEAR_MIN = 16.0
 _NEAR_RING = 0.25
@@ -481,8 +483,9 @@ def _lattice_cores(area, radius_fn, r_lo: float, seed: int) -> tuple[np.ndarray,
     radius short of the border between them each, so they never conflict, and
     Poisson-disk samples fill the band between them.  A radius that varies
     continuously (a feathered border) holds no lattice.  A radius holding
-    `_NEAR_MIN` to `_NEAR_AREA` squared radii keeps its lattice up to `_NEAR_RING`
-    radii from a denser radius (a smaller one); its points come first.
+    `_NEAR_MIN` to `_NEAR_AREA` squared radii, all of them a radius inside the
+    area (a region inside the part), keeps its lattice up to `_NEAR_RING` radii
+    from a denser radius (a smaller one); its points come first.
 
     Returns
     -------
@@ -497,10 +500,14 @@ def _lattice_cores(area, radius_fn, r_lo: float, seed: int) -> tuple[np.ndarray,
     probe = np.c_[gx.ravel(), gy.ravel()]
     if len(probe) == 0:
         return np.zeros((0, 2)), np.zeros(0)
-    values, counts = np.unique(radius_fn(probe), return_counts=True)
+    probe_radius = radius_fn(probe)
+    values, counts = np.unique(probe_radius, return_counts=True)
     held = counts * step * step / (values * values)  # squared radii of area
     values, held = values[held >= _LATTICE_AREA], held[held >= _LATTICE_AREA]  # a continuous radius: none
     reaches = (held >= _NEAR_MIN) & (held < _NEAR_AREA)
+    for k in np.flatnonzero(reaches):  # only a zone enclosed in the area: a region, not a part's base
+        inside = probe[probe_radius == values[k]]
+        reaches[k] = bool(contains_xy(area.buffer(-values[k], 4), inside[:, 0], inside[:, 1]).all())
     ring = np.exp(2j * np.pi * np.arange(_LATTICE_RING) / _LATTICE_RING)
     ring = np.stack((ring.real, ring.imag), axis=1)
     first, rest = [], []
@@ -546,9 +553,9 @@ def _sample_fast(area, radius_fn, seed: int, keep: list | None = None, lattice: 
         return _fill_gaps_constant(area, _uniform_level(area, spacing, r_lo, seed), r_lo)
     first, reaching = _lattice_cores(area, radius_fn, r_lo, seed) if lattice else (None, np.zeros(0))
     poisson_seed = seed if between_seed is None else _BETWEEN_SALT * (seed + 1) + between_seed
-    cross = (_CROSS, reaching) if len(reaching) else None
-    samples, samples_r = _variable_level(area, spacing, r_lo, radius_fn, poisson_seed, first, info, cross)
-    return _fill_gaps_variable(area, samples, samples_r, radius_fn, keep=keep, cross=cross)
+    reaching = reaching if len(reaching) else None
+    samples, samples_r = _variable_level(area, spacing, r_lo, radius_fn, poisson_seed, first, info, reaching)
+    return _fill_gaps_variable(area, samples, samples_r, radius_fn, keep=keep, reaching=reaching)
 
 
 def sample_lattice(region, radius: RadiusLike, *, seed: int = 0,
@@ -803,7 +810,7 @@ def _fill_gaps_constant(area, samples: np.ndarray, radius: float) -> np.ndarray:
 
 
 def _fill_gaps_variable(area, samples, samples_r, radius_fn, passes: int = 6, keep: list | None = None,
-                        cross=None):
+                        reaching=None):
     """Insert circumcentres of empty circles wider than the radius (variable r).
 
     A Delaunay triangle whose circumradius exceeds the radius at its
@@ -844,13 +851,13 @@ def _fill_gaps_variable(area, samples, samples_r, radius_fn, passes: int = 6, ke
         rc = radius_fn(center)
         gap = radius > rc * (1 + 1e-9)
         center, rc = center[gap], rc[gap]
-        ci, _ = close_pairs(center, rc, samples, samples_r, cross=cross)
+        ci, _ = close_pairs(center, rc, samples, samples_r, reaching=reaching)
         free = np.ones(len(center), dtype=bool)
         free[ci] = False
         center, rc = center[free], rc[free]
         if len(center) == 0:
             break
-        pi, pj = close_pairs(center, rc, cross=cross)
+        pi, pj = close_pairs(center, rc, reaching=reaching)
         won = greedy_independent_set(len(center), pi, pj, np.arange(len(center), dtype=float))
         samples = np.r_[samples, center[won]]
         samples_r = np.r_[samples_r, rc[won]]

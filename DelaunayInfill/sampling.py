@@ -24,9 +24,9 @@ Three samplers:
     orientation and offset hashed from the seed, anchored at the origin)
     wherever the radius is constant: with a constant radius the lattice is
     the whole sampling; with a variable one each radius keeps its lattice a
-    radius short of where the radius changes (a zone only a few lattice sides
-    across: a quarter radius short of a denser zone, whose samples then keep
-    their distance), and ``fast``'s candidates (after the lattice points in
+    radius short of where the radius changes (a region inside the part only a
+    few lattice sides across: a quarter radius short of a denser zone, whose
+    samples then keep their distance), and ``fast``'s candidates (after the lattice points in
     priority) fill the bands between.  The
     lattice is a Poisson-disk set (side > r) and maximal (circumradius
     0.72 r < r); its Delaunay triangles are equilateral.

@@ -34,6 +34,7 @@ if not SHAPELY2:  # pragma: no cover - exercised on the shapely 1.8 CI leg
 __all__ = [
     "SHAPELY2",
     "as_area",
+    "boxes_meet",
     "contains_xy",
     "covers_segments",
     "distances",
@@ -131,6 +132,11 @@ def to_multipolygon(geometry: BaseGeometry | None) -> MultiPolygon:
         elif not any(part.is_empty for part in geometry.geoms):  # pragma: no cover - shapely 1.8
             return geometry
     return MultiPolygon(polygons_of(geometry))
+
+
+def boxes_meet(a: tuple, b: tuple) -> bool:
+    """Whether two bounding boxes (minx, miny, maxx, maxy) overlap or touch."""
+    return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
 
 
 def empty_area() -> MultiPolygon:

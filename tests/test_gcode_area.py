@@ -648,15 +648,40 @@ def test_a_wall_less_modifier_loses_half_a_line_width_along_the_area_s_border_on
     """CuraEngine 4.13 insets a wall-less infill mesh's part of the host's infill area by half a line
     width: the rim along the area's border inside the modifier goes; the host's part and the border
     between host and modifier stay."""
-    from DelaunayInfill.gcode.area import without_modifier_rims
+    from DelaunayInfill.gcode.area import carved_as_cura4
 
     lw = 0.4
     area = MultiPolygon([box(0, 0, 20, 10)])
-    got = without_modifier_rims(area, [box(10, -5, 30, 15)], lw)
+    got = carved_as_cura4(area, [box(10, -5, 30, 15)], lw).area
     inside = contains_xy(got, np.array([15.0, 15.0, 19.9, 5.0, 10.05, 12.0]), np.array([0.1, 0.3, 5.0, 0.1, 5.0, 9.9]))
     assert inside.tolist() == [False, True, False, True, True, False]
     assert got.area == pytest.approx(200 - (10 + 10 + 10 - 0.2 * 2) * lw / 2, abs=0.05)
-    assert without_modifier_rims(area, [box(30, 0, 40, 10)], lw) is area  # no overlap: as it was
+    assert carved_as_cura4(area, [box(30, 0, 40, 10)], lw).area is area  # no overlap: as it was
+
+
+def test_a_modifier_inside_another_is_inset_twice_and_a_narrow_strip_of_it_is_no_mesh_s():
+    """CuraEngine 4.13 carves wall-less infill meshes in their order: the later one takes its share of the
+    earlier one's own area (already inset by half a line width) and insets it again, then opens it.  In
+    a part 1 mm across, an 80 % modifier over all of it keeps a 0.6 mm strip, and a 60 % one over its
+    right half keeps nothing there (random regions 104: a third of a small part that no mesh fills)."""
+    from DelaunayInfill.gcode.area import carved_as_cura4, cura4_infill_areas
+
+    lw = 0.4
+    area = MultiPolygon([box(0, 0, 10, 1.0)])
+    dense, denser = box(-5, -5, 15, 5), box(5, -5, 15, 5)
+    host, first, second = cura4_infill_areas(area, [dense, denser], lw)
+    assert host.is_empty and second.is_empty
+    assert first.bounds == pytest.approx((0.2, 0.2, 5.0, 0.8), abs=1e-6)
+    alone = cura4_infill_areas(area, [denser], lw)
+    assert alone[1].area == pytest.approx((5.0 - 0.4) * 0.6, abs=0.01)  # (without the first: kept, inset once)
+    carved = carved_as_cura4(area, [dense, denser], lw)
+    got = carved.area
+    inside = contains_xy(got, np.array([2.0, 5.1, 6.0, 9.0]), np.array([0.5, 0.5, 0.5, 0.5]))
+    assert inside.tolist() == [True, True, False, False]  # up to half a line width past the first's own area
+    assert carved.pieces.equals(first)  # (the islands of Cura's infill: each mesh's own area)
+    # where Cura printed, its area is, whatever the model says
+    line = np.array([[[7.0, 0.5], [8.0, 0.5]]])
+    assert contains_xy(carved_as_cura4(area, [dense, denser], lw, line).area, np.array([7.5]), np.array([0.5]))[0]
 
 
 def test_an_opening_survives_a_mitred_buffer_that_crosses_itself():

@@ -27,6 +27,7 @@ from shapely.geometry import Polygon
 from shapely.validation import make_valid
 
 from ..geometry import (
+    boxes_meet,
     contains_xy,
     empty_area,
     multilinestring_of,
@@ -40,7 +41,9 @@ __all__ = [
     "MeshLayer",
     "mesh_layer",
     "without_foreign",
-    "without_modifier_rims",
+    "CarvedArea",
+    "carved_as_cura4",
+    "cura4_infill_areas",
     "runs_of",
     "fill_hull",
     "fraction_inside",
@@ -662,26 +665,96 @@ def without_foreign(parse: LayerParse, geo: MeshLayer, line_width: float, cache:
     return MeshLayer(geo.mesh, geo.fill, geo.fill_block, geo.fill_de, geo.part, smaller, geo.has_walls, geo.used_hull)
 
 
-def without_modifier_rims(area, modifiers: list, line_width: float):
-    """`area` less the rim, half a line width wide along its border, that wall-less infill meshes leave empty.
+@dataclass(frozen=True)
+class CarvedArea:
+    """A host's infill area as CuraEngine 4.13 leaves it to its wall-less modifiers and itself."""
+
+    area: object  # MultiPolygon: where the new infill may go, mm
+    pieces: object  # MultiPolygon: the meshes' own areas, each an island of Cura's infill (None: as `area`'s)
+
+
+def carved_as_cura4(area, modifiers: list, line_width: float, lines: np.ndarray | None = None) -> CarvedArea:
+    """`area` less what wall-less infill meshes leave empty in CuraEngine 4.13: a rim along its border,
+    and the pieces its carving insets and opens away.
 
     CuraEngine 4.13 gives an infill-mesh modifier the host's infill area inside its outline and insets
     that by half an inner wall's width even when the modifier has no walls (``generateInfill``'s
     inner-wall offset): its lines end half a line width short of where the host's would (CuraEngine 5
     does not inset).  A narrow part inside such a modifier printed to the host's border put 1-12 % of
-    a layer's new infill where Cura prints none (random regions 1, 10, 15).
+    a layer's new infill where Cura prints none (random regions 1, 10, 15).  Pieces that carving leaves
+    to no mesh (`cura4_infill_areas`) go too, but for a quarter line width round each mesh's own area
+    (which closes the half line width Cura leaves between two meshes' areas, not the wider gap where
+    an opening rounded their corners) and half a line width round Cura's lines.
 
     Parameters
     ----------
     area : MultiPolygon
         The host's infill area, mm.
     modifiers : list of (Multi)Polygon
-        The modifiers' areas in the layer (any extent: only where they overlap `area` counts), mm.
+        The modifiers' areas in the layer in CuraEngine's mesh order (any extent: only where they
+        overlap `area` counts), mm.
     line_width : float
         mm.
+    lines : ndarray, shape (k, 2, 2), optional
+        Cura's FILL of the host and its modifiers, mm: where it runs stays.
     """
-    inside = area.buffer(-line_width / 2, 4)
-    rim = unary_union(modifiers).intersection(area).difference(inside)
-    if rim.is_empty:
-        return area
-    return to_multipolygon(area.difference(rim))
+    modifiers = [m for m in modifiers if not m.is_empty and boxes_meet(m.bounds, area.bounds) and m.intersects(area)]
+    if not modifiers or area.is_empty:
+        return CarvedArea(area, None)
+    rim = unary_union(modifiers).intersection(area).difference(area.buffer(-line_width / 2, 4))
+    kept = area.difference(rim) if not rim.is_empty else area
+    owned = [own for own in cura4_infill_areas(area, modifiers, line_width) if not own.is_empty]
+    if lines is not None and len(lines):  # (where Cura printed, its area is: the witness outranks the model)
+        owned.append(_buffer_runs(list(lines), line_width / 2).intersection(area))
+    if not owned:
+        return CarvedArea(empty_area(), empty_area())
+    pieces = to_multipolygon(unary_union(owned))
+    return CarvedArea(_valid(kept.intersection(pieces.buffer(line_width / 4 + _EPS, 4))), pieces)
+
+
+def _valid(shape):
+    """`shape` as a valid MultiPolygon: GEOS can hand back an overlay whose holes nest, which the next
+    overlay fails on (random regions 50: "TopologyException: found non-noded intersection", a failed layer)."""
+    shape = to_multipolygon(shape)
+    return shape if shape.is_valid else to_multipolygon(shape.buffer(0))
+
+
+def cura4_infill_areas(area, modifiers: list, line_width: float) -> list:
+    """Each mesh's own infill area as CuraEngine 4.13 carves wall-less infill meshes out of a host's.
+
+    Each modifier in turn (a later one wins) takes its outline's share of every earlier mesh's own area,
+    which loses it; each share is a part of the modifier, inset by half a line width (the inner-wall
+    offset it gets without walls) and opened by half a line width (``processInfillMesh``, then
+    ``generateInfill``).  A modifier inside another is inset twice over: a strip of it narrower than
+    about three line widths along the host's walls is no mesh's (random regions 104: a 60 % sphere
+    over an 80 % cube in a 5 x 2 mm part, a third of the part).
+
+    Parameters
+    ----------
+    area : MultiPolygon
+        The host's infill area, mm.
+    modifiers : list of (Multi)Polygon
+        The wall-less modifiers' sections in the layer, in CuraEngine's mesh order, mm.
+    line_width : float
+        mm.
+
+    Returns
+    -------
+    list of MultiPolygon
+        The host's own area, then each modifier's.
+    """
+    owns = [to_multipolygon(area)]
+    for outline in modifiers:
+        shares = []
+        for k, own in enumerate(owns):
+            if own.is_empty or not boxes_meet(own.bounds, outline.bounds):
+                continue
+            share = own.intersection(outline)
+            if share.is_empty:
+                continue
+            shares.append(share)
+            owns[k] = _valid(own.difference(outline))
+        parts = [_opened_as_cura4(to_multipolygon(s.buffer(-line_width / 2, join_style=2, mitre_limit=1.2)), line_width)
+                 for s in shares]
+        owns.append(_valid(unary_union([p for p in parts if not p.is_empty])) if parts else empty_area())
+    return owns

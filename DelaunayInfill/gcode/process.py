@@ -32,6 +32,7 @@ from ..geometry import (
 )
 from ..routing import TravelCost, order_paths, plan_runs
 from .area import (
+    carved_as_cura4,
     AreaCache,
     MeshLayer,
     closed_loops,
@@ -41,7 +42,6 @@ from .area import (
     sample_segments,
     segments_of,
     without_foreign,
-    without_modifier_rims,
 )
 from .emit import EmitParams, emit_block
 from .estimate import move_seconds, move_times
@@ -412,7 +412,7 @@ def _split_empty_regions(regions: list) -> tuple[list, object, list]:
 
 
 # ----------------------------------------------------------------------------- the run
-_NOTHING_LEARNED = (None,) * 5
+_NOTHING_LEARNED = (*(None,) * 5, frozenset())
 # FILL extruding this much more per mm (against the walls) than before: infill combined over layers
 _COMBINED_RATIO = 1.6
 # A density read from the lines' spacing this much over what their length gives (in an area at least
@@ -467,10 +467,12 @@ class _MeshFacts:
     few_lines_area: float = 0.0  # ... and its infill area there, mm2 (a part without modifiers)
     few_lines_chunk: int = -1  # the chunk they were last added for
     sections: tuple = ()  # combined infill: its last layers' rebuilt infill areas, newest last
+    modifiers: frozenset = frozenset()  # as a host: its wall-less modifiers' names, from their FILL so far
 
     def learned(self) -> tuple:
         """What a layer's result depends on (the extruder only picks the footer's density, read anew)."""
-        return (self.line_width, self.density, self.region_density, self.reach_density, self.cura_density)
+        return (self.line_width, self.density, self.region_density, self.reach_density, self.cura_density,
+                self.modifiers)
 
 
 @dataclass
@@ -514,6 +516,7 @@ class _FillArea:
     before_empty: object  # the area before the 0 % cut (what a 0 % region's report counts)
     infill_walls: list  # Cura's infill walls, kept as printed (closed FILL loops), each (m, 2)
     in_walls: object  # which of the host's FILL segments are on them (None: no infill walls)
+    pieces: object = None  # the islands of Cura's infill in `area` (CuraEngine 4.13's carving; None: its pieces)
 
 
 @dataclass
@@ -1240,7 +1243,7 @@ class _Run:
         density = self._density_of(st.name, g.fill, lw, area, alone=not children)
         if density <= 0.0:
             return None  # a 0 % mesh has no infill (Cura made none)
-        fill = self._fill_area(g, area, zones, lw)
+        fill = self._fill_area(g, area, zones, lw, np.concatenate([g.fill, *(c.geo.fill for c in children)]))
         area, region_list, empty = fill.area, fill.regions, fill.empty
         my_blocks, fill_blocks, start, end = _host_blocks(parse.blocks, {st.name, *(c.name for c in children)})
         if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
@@ -1261,15 +1264,15 @@ class _Run:
             not_kept = empty if not nesting.inner_parts else to_multipolygon(
                 unary_union([*nesting.inner_parts, *([empty] if empty is not None else [])]))
             paths = self._with_cura_kept(st, children, area, paths, reach, not_kept, start, out, fill.infill_walls,
-                                         fill.in_walls, end, nesting.lines_inside)
+                                         fill.in_walls, end, nesting.lines_inside, fill.pieces)
         for part, zname in fill.empty_parts:
             self._tally(zname, 0.0, 0.0, part.intersection(fill.before_empty).area)
         travel_part = g.part if g.part is not None else area.buffer(lw / 2)
         return _HostInfill(st, my_blocks, fill_blocks, paths, reach, empty, zones.covered_children, travel_part)
 
-    def _fill_area(self, g: MeshLayer, area, zones: _LayerRegions, lw: float) -> _FillArea:
+    def _fill_area(self, g: MeshLayer, area, zones: _LayerRegions, lw: float, cura_lines: np.ndarray) -> _FillArea:
         """Where the new infill goes in a host's confirmed `area`: inside Cura's infill walls, outside the 0 %
-        regions, and (CuraEngine 4) half a line width clear of the border inside wall-less modifiers."""
+        regions, and (CuraEngine 4.13) clear of what its carving of wall-less modifiers leaves empty."""
         # Cura's Infill Wall Line Count: closed FILL loops round the infill area stay as Cura printed
         # them, and the new infill fills what they enclose
         infill_walls, in_walls = closed_loops(g.fill) if self.infill_walls > 0 else ([], None)
@@ -1281,14 +1284,16 @@ class _Run:
         regions, empty, empty_parts = _split_empty_regions(zones.regions)
         if empty is not None:
             area = to_multipolygon(area.difference(empty))
+        pieces = None
         if zones.rimmed and not area.is_empty:  # (after the 0 % cut: a modifier's lines stop short of it too)
             with self.clock("areas"):
-                area = without_modifier_rims(area, zones.rimmed, lw)
+                carved = carved_as_cura4(area, zones.rimmed, lw, cura_lines)
+                area, pieces = carved.area, carved.pieces
                 if zones.split_parts_only:  # (the split's parts are taken as parts of the area: cut them too;
                     # a part all in the rim is no region here)
                     cut = [(to_multipolygon(a.intersection(area)), d, name) for a, d, name in regions]
                     regions = [(a, d, name) for a, d, name in cut if not a.is_empty]
-        return _FillArea(area, regions, empty, empty_parts, before_empty, infill_walls, in_walls)
+        return _FillArea(area, regions, empty, empty_parts, before_empty, infill_walls, in_walls, pieces)
 
     def _layer_regions(self, parse: LayerParse, st: _MeshStep, children: list) -> _LayerRegions:
         """The density regions of a host in this layer: its modifiers' parts, then the user's at its slice height.
@@ -1307,33 +1312,45 @@ class _Run:
         # (the modifiers' parts are pieces of the host's area: `_modifier_areas` splits it)
         with self.clock("areas"):
             parts = self._modifier_areas(st, children) if children else []
+        # CuraEngine 4.13 carves every wall-less infill mesh out of its host's area, one without lines in this
+        # layer too (a later one took all its share: random regions 1): the given regions that are this
+        # host's modifiers in any layer so far, in order
+        facts = self._facts(st.name)
+        facts.modifiers = facts.modifiers | {c.name for c in children}
+        modifiers = {*facts.modifiers, *map(_file_name, facts.modifiers)}
+        rimmed = [(k, a) for k, (a, _, name) in enumerate(given) if name in modifiers] if self.cura4 else []
         for c, ca in zip(children, parts, strict=True):
             if ca.is_empty:
                 continue
             zones.covered_children.add(c.name)
-            mine = [a for a, _, name in given if name in (c.name, _file_name(c.name))]
-            if self.cura4 and not c.geo.has_walls:
-                zones.rimmed.extend(mine or [ca])
+            mine = [(k, a) for k, (a, _, name) in enumerate(given) if name in (c.name, _file_name(c.name))]
+            if self.cura4 and not mine:
+                rimmed.append((len(given) + len(rimmed), ca))
             if mine:
                 continue  # the caller gave this modifier's exact mesh as a Region: keep that one only
             zones.regions.append((ca, self._region_mesh_density(c.name, c.geo.fill, c.line_width, ca),
                                   f"mesh {c.name}"))
+        # (in CuraEngine's mesh order, as the given regions are: a later modifier takes from the earlier ones)
+        zones.rimmed = [a for _, a in sorted(rimmed, key=lambda item: item[0])]
         zones.regions.extend(given)
         return zones
 
     def _with_cura_kept(self, st: _MeshStep, children: list, area, paths: list, reach: float, not_kept, start,
-                        out: _LayerOut, infill_walls: list = (), in_walls=None, end=None, lines_inside=None) -> list:
+                        out: _LayerOut, infill_walls: list = (), in_walls=None, end=None, lines_inside=None,
+                        pieces=None) -> list:
         """`paths` with Cura's lines where the new infill does not take over, all in print order.
 
         Those lines (a part not confirmed, an island too small for the pattern, Cura's infill walls)
         are printed as Cura printed them, on the route with the new paths; `out` counts them.  None is
         kept in `not_kept` (0 % regions, the hosts inside this one); `lines_inside` are Cura lines of an
-        outer host's modifier inside this one, kept as its own are.
+        outer host's modifier inside this one, kept as its own are; `pieces` the islands of Cura's infill in
+        `area` when they are not its pieces.
         """
         own = st.geo.fill if in_walls is None else st.geo.fill[~in_walls]
         child_fills, apart = self._modifier_lines_apart(children, paths, st.line_width, reach, not_kept)
         cura_fill = np.concatenate([own, *child_fills, *([lines_inside] if lines_inside is not None else [])])
-        kept = [*kept_cura_pieces(cura_fill, area, paths, st.line_width, reach, not_kept), *apart, *infill_walls]
+        kept = [*kept_cura_pieces(cura_fill, area, paths, st.line_width, reach, not_kept, pieces=pieces), *apart,
+                *infill_walls]
         if kept:
             paths, _ = order_paths([*paths, *kept], start, end=end)
         out.stats["cura_infill_kept_mm"] += float(sum(np.hypot(*np.diff(k, axis=0).T).sum() for k in kept))

@@ -24,6 +24,7 @@ from shapely.geometry import MultiPolygon, Polygon
 
 from ..geometry import (
     boundary_segments,
+    boxes_meet,
     contains_xy,
     convex_hull_of,
     distances,
@@ -786,7 +787,7 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
     for k in range(1, len(fills)):
         part = held[k]
         for later in held[k + 1:]:
-            if not part.is_empty and not later.is_empty and _boxes_meet(part.bounds, later.bounds):
+            if not part.is_empty and not later.is_empty and boxes_meet(part.bounds, later.bounds):
                 part = part.difference(later)
         claimed[k] = to_multipolygon(part)
     holding = [h for h in held[1:] if not h.is_empty]
@@ -822,11 +823,6 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
         kept = [piece for piece, o in zip(slivers, owner.tolist(), strict=True) if o < 0]
         host = to_multipolygon(unary_union([core, *kept])) if kept else core
     return [host, *children]
-
-
-def _boxes_meet(a: tuple, b: tuple) -> bool:
-    """Whether two bounding boxes (minx, miny, maxx, maxy) overlap or touch."""
-    return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
 
 
 def _nearest_within(pieces: list, targets: list, limit: float) -> np.ndarray:

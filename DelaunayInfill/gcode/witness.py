@@ -186,6 +186,7 @@ def kept_cura_pieces(
     reach: float,
     no_infill=None,
     min_length: float | None = None,
+    pieces=None,
 ) -> list[np.ndarray]:
     """Stretches of Cura's FILL lines that the new infill does not take over.
 
@@ -213,6 +214,10 @@ def kept_cura_pieces(
     no_infill : (Multi)Polygon, optional
     min_length : float, optional
         Pieces shorter than this are dropped (one line width by default), mm.
+    pieces : MultiPolygon, optional
+        The islands of Cura's infill inside `area`, judged as its pieces are (CuraEngine 4.13 leaves
+        a gap between a host's and its wall-less modifiers' areas that the new infill crosses), mm;
+        by default `area`'s pieces.
 
     Returns
     -------
@@ -233,7 +238,7 @@ def kept_cura_pieces(
     k = np.arange(seg.size) - first[seg]
     t0, t1 = k / n[seg], (k + 1) / n[seg]
     mid = cura[seg, 0] + d[seg] * ((t0 + t1) / 2)[:, None]
-    keep = _uncovered(mid, area, new_paths, line_width, reach, groups=(seg, k, length / n))
+    keep = _uncovered(mid, area, new_paths, line_width, reach, groups=(seg, k, length / n), pieces=pieces)
     if no_infill is not None and not no_infill.is_empty and keep.any():
         keep &= ~contains_xy(no_infill, mid[:, 0], mid[:, 1])
     if not keep.any():
@@ -323,12 +328,12 @@ def isolated_cura_lines(cura: np.ndarray, new_places: cKDTree | None, line_width
 
 
 def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width: float, reach: float,
-               groups: tuple | None = None) -> np.ndarray:
+               groups: tuple | None = None, pieces=None) -> np.ndarray:
     """Whether each point is outside `area` (grown by a line width) or not taken over in its piece (see above).
 
     `groups` (segment index (p,), step index (p,), step length per segment (k,) mm) says that the
     points are the midpoints of equal steps along Cura's segments: runs of them are then tested at
-    once (`_near`).
+    once (`_near`).  `pieces`: the pieces judged (by default `area`'s).
     """
     out = np.ones(len(points), dtype=bool)
     if area is None or area.is_empty:
@@ -342,7 +347,8 @@ def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width
     if len(rest):
         member[rest[distances(points_of(points[rest]), area) <= line_width]] = True
     decided = np.zeros(len(points), dtype=bool)
-    for piece in polygons_of(area):
+    in_pieces = inside if pieces is None else contains_xy(pieces, points[:, 0], points[:, 1])
+    for piece in polygons_of(area if pieces is None else pieces):
         if piece.area > reach * reach:
             continue
         # a small piece with far less new infill than Cura's (an island the pattern barely reaches):
@@ -350,7 +356,7 @@ def _uncovered(points: np.ndarray, area, new_paths: list[np.ndarray], line_width
         grown = piece.buffer(line_width, 2)
         # its own points, and those at its border that lie in no piece
         mine = member & ~decided & (contains_xy(piece, points[:, 0], points[:, 1])
-                                    | (~inside & contains_xy(grown, points[:, 0], points[:, 1])))
+                                    | (~in_pieces & contains_xy(grown, points[:, 0], points[:, 1])))
         if not mine.any():
             continue
         decided |= mine

@@ -1243,7 +1243,7 @@ class _Run:
         density = self._density_of(st.name, g.fill, lw, area, alone=not children)
         if density <= 0.0:
             return None  # a 0 % mesh has no infill (Cura made none)
-        fill = self._fill_area(g, area, zones, lw, np.concatenate([g.fill, *(c.geo.fill for c in children)]))
+        fill = self._fill_area(g, area, zones, lw, [g.fill, *(c.geo.fill for c in children)])
         area, region_list, empty = fill.area, fill.regions, fill.empty
         my_blocks, fill_blocks, start, end = _host_blocks(parse.blocks, {st.name, *(c.name for c in children)})
         if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
@@ -1270,9 +1270,10 @@ class _Run:
         travel_part = g.part if g.part is not None else area.buffer(lw / 2)
         return _HostInfill(st, my_blocks, fill_blocks, paths, reach, empty, zones.covered_children, travel_part)
 
-    def _fill_area(self, g: MeshLayer, area, zones: _LayerRegions, lw: float, cura_lines: np.ndarray) -> _FillArea:
+    def _fill_area(self, g: MeshLayer, area, zones: _LayerRegions, lw: float, cura_fills: list) -> _FillArea:
         """Where the new infill goes in a host's confirmed `area`: inside Cura's infill walls, outside the 0 %
-        regions, and (CuraEngine 4.13) clear of what its carving of wall-less modifiers leaves empty."""
+        regions, and (CuraEngine 4.13) clear of what its carving of wall-less modifiers leaves empty
+        (`cura_fills`: Cura's FILL of the host and of its modifiers, each (k, 2, 2) mm: where it runs stays)."""
         # Cura's Infill Wall Line Count: closed FILL loops round the infill area stay as Cura printed
         # them, and the new infill fills what they enclose
         infill_walls, in_walls = closed_loops(g.fill) if self.infill_walls > 0 else ([], None)
@@ -1287,7 +1288,7 @@ class _Run:
         pieces = None
         if zones.rimmed and not area.is_empty:  # (after the 0 % cut: a modifier's lines stop short of it too)
             with self.clock("areas"):
-                carved = carved_as_cura4(area, zones.rimmed, lw, cura_lines)
+                carved = carved_as_cura4(area, zones.rimmed, lw, np.concatenate(cura_fills))
                 area, pieces = carved.area, carved.pieces
                 if zones.split_parts_only:  # (the split's parts are taken as parts of the area: cut them too;
                     # a part all in the rim is no region here)
@@ -1323,7 +1324,7 @@ class _Run:
             if ca.is_empty:
                 continue
             zones.covered_children.add(c.name)
-            mine = [(k, a) for k, (a, _, name) in enumerate(given) if name in (c.name, _file_name(c.name))]
+            mine = any(name in (c.name, _file_name(c.name)) for _, _, name in given)
             if self.cura4 and not mine:
                 rimmed.append((len(given) + len(rimmed), ca))
             if mine:

@@ -53,7 +53,7 @@ from scipy.spatial import cKDTree
 from .geometry import as_area, contains_xy
 
 __all__ = ["sample_poisson_disk", "uncovered_fraction", "radius_function", "hash_uniform", "lattice_points",
-           "sample_lattice", "LATTICE_SPACING"]
+           "sample_lattice", "LATTICE_SPACING", "LATTICE_AREA", "lattice_basis"]
 
 RadiusLike = float | Callable[[np.ndarray], np.ndarray]
 
@@ -421,7 +421,7 @@ _RING_RADII = 1.0  # ... on a ring of this many radii around it
 # samples).  Larger ones keep their lattice where it fits, however few cells: a 30 mm region at
 # 20 % in a 60 % part (about 4 sides across) measured 0.80 of a uniform pattern's C_min / rho with
 # its lattice against 0.74 with Poisson-disk samples (`bench/bench_regions.py`, 3 seeds).
-_LATTICE_AREA = 4.0
+LATTICE_AREA = 4.0
 # A zone of 16 to 36 squared radii (a few lattice sides across: most of it lies within a radius of
 # its border) keeps its lattice up to _NEAR_RING radii from a denser zone, not one radius: kept a
 # radius off, its border band held no point of its own, only long edges fanning from its few inner
@@ -449,6 +449,13 @@ def lattice_frame(seed: int) -> tuple[float, np.ndarray]:
     return angle, offset
 
 
+def lattice_basis(side: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The two side vectors (2,) mm of a seed's lattice, 60 degrees apart (`lattice_frame`'s orientation)."""
+    angle = lattice_frame(seed)[0]
+    return (side * np.array([math.cos(angle), math.sin(angle)]),
+            side * np.array([math.cos(angle + math.pi / 3), math.sin(angle + math.pi / 3)]))
+
+
 def lattice_points(area, side: float, seed: int = 0) -> np.ndarray:
     """The points (n, 2) of a triangular lattice of the given side inside `area`.
 
@@ -456,10 +463,9 @@ def lattice_points(area, side: float, seed: int = 0) -> np.ndarray:
     and offset from `lattice_frame`, anchored at the origin): another area
     cuts the same lattice.
     """
-    angle, offset = lattice_frame(seed)
-    v1 = side * np.array([math.cos(angle), math.sin(angle)])
-    v2 = side * np.array([math.cos(angle + math.pi / 3), math.sin(angle + math.pi / 3)])
+    v1, v2 = lattice_basis(side, seed)
     basis = np.stack((v1, v2), axis=1)  # columns
+    offset = lattice_frame(seed)[1]
     origin = basis @ offset
     x0, y0, x1, y1 = area.bounds
     corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]]) - origin
@@ -477,7 +483,7 @@ def lattice_points(area, side: float, seed: int = 0) -> np.ndarray:
 def _lattice_cores(area, radius_fn, r_lo: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Lattice points in the parts of `area` where the radius is constant (variable radius).
 
-    Each radius that holds at least `_LATTICE_AREA` squared radii gets its lattice (side
+    Each radius that holds at least `LATTICE_AREA` squared radii gets its lattice (side
     ``LATTICE_SPACING * r``), kept where the radius is that value at the point
     and on a ring of one radius around it: the lattices of two radii end a
     radius short of the border between them each, so they never conflict, and
@@ -503,7 +509,7 @@ def _lattice_cores(area, radius_fn, r_lo: float, seed: int) -> tuple[np.ndarray,
     probe_radius = radius_fn(probe)
     values, counts = np.unique(probe_radius, return_counts=True)
     held = counts * step * step / (values * values)  # squared radii of area
-    values, held = values[held >= _LATTICE_AREA], held[held >= _LATTICE_AREA]  # a continuous radius: none
+    values, held = values[held >= LATTICE_AREA], held[held >= LATTICE_AREA]  # a continuous radius: none
     reaches = (held >= _NEAR_MIN) & (held < _NEAR_AREA)
     for k in np.flatnonzero(reaches):  # only a zone enclosed in the area: a region, not a part's base
         inside = probe[probe_radius == values[k]]

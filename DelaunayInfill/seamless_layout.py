@@ -4,7 +4,9 @@
 
 1. `plan`: what every sampling of the build shares: the zones' meter where the
    lines are printed, the area sampled (the footprint grown by the largest
-   radius) and what kind of calibration each zone allows.
+   radius), what kind of calibration each zone allows and which sparse zones
+   are enclosed by denser ones (`enclosed_zones`: sampled as holes, filled
+   with their own lattice).
 2. `calibrated`: samplings at corrected densities (`sampled`, one sampling,
    its triangulation and how far each zone is off) while they bring the zones
    closer to their targets; the best is kept.
@@ -24,12 +26,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from shapely.ops import unary_union
 
 from .calibration import TOLERANCE, balance_zones, edge_cache, fine_tune_scale, scale_limit, settled_bands
 from .density import DensityMap, sampling_radius, shortest_edges
-from .geometry import to_multipolygon
+from .enclosed_zones import border_samples, enclosed_sparse_zones, hole_lines
+from .geometry import contains_xy, to_multipolygon
 from .metering import meter_for
-from .sampling import sample_lattice, sample_poisson_disk, sample_triangulated
+from .sampling import LATTICE_SPACING, sample_lattice, sample_poisson_disk, sample_triangulated
 from .triangulation import (
     GrowingDelaunay,
     delaunay_triangles,
@@ -64,6 +68,8 @@ class Sampling:
     fixed: int  # how many of the first points lie on a lattice
     factors: np.ndarray  # (zones,) the density factors it was sampled at
     band_error: float = 0.0  # the worst border band's error (fraction), where measured
+    extra: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2, 2)))  # (x, 2, 2) mm: the
+    # enclosed zones' lattice lines, the last x of `segments` (no edges of `points`)
 
 
 @dataclass(frozen=True)
@@ -87,7 +93,8 @@ class SeamlessBuild:
     meter : ZoneMeter or RasterMeter
         The zones where the lines are printed.
     sampling_area : shapely MultiPolygon
-        The footprint grown by the largest radius (the pattern reaches past the border).
+        The footprint grown by the largest radius (the pattern reaches past the border), without the
+        enclosed zones.
     targets : ndarray, shape (zones,)
         Target densities.
     settled : ndarray of bool, shape (zones,)
@@ -100,6 +107,13 @@ class SeamlessBuild:
         How far the pattern may be scaled (`calibration.scale_limit`).
     growing : bool
         The samplings keep a growing triangulation (balancing refines it).
+    surround : ndarray of int, shape (zones,)
+        For a sparse zone enclosed by denser ones (`enclosed_zones`), the zone whose density it is
+        sampled at (it is a hole in the sampling, filled with its own lattice afterwards); else -1.
+    zone_areas : tuple of MultiPolygon
+        The zones over the sampling area (`DensityMap.zones`), for the enclosed ones.
+    cut : shapely MultiPolygon or None
+        The enclosed zones together.
     """
 
     area: object
@@ -119,6 +133,9 @@ class SeamlessBuild:
     single: bool
     limit: float
     growing: bool
+    surround: np.ndarray = None
+    zone_areas: tuple = ()
+    cut: object = None
 
     def radius_of(self, density):
         """Poisson-disk radius (mm) first taken for `density` (fraction or array of them)."""
@@ -133,6 +150,11 @@ class SeamlessBuild:
     def loop_tolerance(self) -> float:
         """The calibration loop stops at this worst zone error (fraction)."""
         return TOLERANCE if self.single else _LOOP_TOLERANCE
+
+    @property
+    def holes(self) -> np.ndarray:
+        """(zones,) bool: the enclosed sparse zones."""
+        return np.zeros(len(self.targets), bool) if self.surround is None else self.surround >= 0
 
 
 def build_seamless(area, dmap: DensityMap, width: float, seed: int, calibration: str, relax: int, sampler: str,
@@ -185,14 +207,25 @@ def plan(area, dmap: DensityMap, width: float, seed: int, calibration: str, rela
     # A single zone is calibrated by scaling one sampling (continuous, cheap) as soon as
     # the scale needed is within reach; re-sampling only moves it by jumps of 1-2 points.
     single = calibration == "measured" and np.count_nonzero(settled) == 1
+    surround, zone_areas, cut = None, (), None
+    if sampler == "lattice" and calibration == "measured" and several and not relax:
+        zone_areas = tuple(dmap.zones(sampling_area))
+        surround = enclosed_sparse_zones(dmap, list(zone_areas), area, np.sqrt(radius_squared), settled)
+        if (surround >= 0).any():  # (sampled round, as holes)
+            cut = to_multipolygon(unary_union([zone_areas[k] for k in np.flatnonzero(surround >= 0)]))
+            sampling_area = to_multipolygon(sampling_area.difference(cut))
     return SeamlessBuild(area, printed, dmap, width, seed, calibration, relax, sampler, meter, sampling_area,
                          targets, settled, small, coarse, bool(single), scale_limit(area, reach),
-                         not single and calibration == "measured")
+                         not single and calibration == "measured", surround, zone_areas, cut)
 
 
 def sampled(build: SeamlessBuild, factors: np.ndarray, iteration: int, between_seed: int | None = None) -> Sampling:
     """One sampling at the densities ``targets * factors`` (zones,), triangulated and measured."""
-    scaled = build.dmap.with_densities(build.targets * factors)
+    densities = build.targets * factors
+    # An enclosed zone is sampled at its surroundings' density and left out: a hole in the sampling.
+    sampled_at = np.where(build.holes, densities[np.maximum(build.surround, 0)], densities) \
+        if build.holes.any() else densities
+    scaled = build.dmap.with_densities(sampled_at)
 
     def radius_fn(xy):
         return build.radius_of(scaled.at(xy))
@@ -200,16 +233,20 @@ def sampled(build: SeamlessBuild, factors: np.ndarray, iteration: int, between_s
     # Several zones may be balanced afterwards: it goes on from a growing triangulation.
     points, fixed, growing = _sample(build.sampling_area, radius_fn, build.seed, build.sampler, build.relax,
                                      growing=build.growing, between_seed=between_seed)
-    triangles, edges = _triangulate(points, growing, radius_fn, build.dmap, build.width)
-    segments = points[edges]
+    border = _on_hole_borders(build, points, sampled_at)  # the denser zones' triangles reach them
+    points = np.concatenate((points, border))
+    triangles, edges = _triangulate(points, growing, radius_fn, build.dmap, build.width, build.cut, len(border))
+    extra = _hole_lattices(build, points, triangles, densities, sampled_at)
+    segments = np.concatenate((points[edges], extra))
     inside = build.meter.inside_all(segments)
     measured = build.meter.densities_of(inside, build.width)
+    inside = inside[:, :len(edges)]
     error = np.abs(measured - build.targets)
     # Small zones above target can be thinned afterwards; shortfalls cannot.
     error = np.where(build.small & (measured > build.targets), 0.25 * error, error)
     worst = float(np.nanmax(np.where(build.settled, error, 0.0))) if len(error) else 0.0
     return Sampling(worst, points, triangles, segments, measured, iteration, edges, inside, growing, fixed,
-                    factors.copy())
+                    factors.copy(), extra=extra)
 
 
 def calibrated(build: SeamlessBuild, between_seed: int | None = None) -> Sampling:
@@ -276,6 +313,8 @@ def finished(build: SeamlessBuild, best: Sampling) -> Sampling:
     """The sampling calibrated on: what the radius could not reach, and crowded nodes thinned."""
     meter, targets, width, settled = build.meter, build.targets, build.width, build.settled
     points, triangles, segments, measured = best.points, best.triangles, best.segments, best.measured
+    extra, holes = best.extra, build.holes
+    segments = segments[:len(segments) - len(extra)]
     if build.single and best.worst > TOLERANCE / 4:
         points, segments, measured = fine_tune_scale(points, best.edges, meter, targets, measured, width,
                                                      build.limit, build.area)
@@ -283,13 +322,16 @@ def finished(build: SeamlessBuild, best: Sampling) -> Sampling:
         # Zones still off target after calibration (small ones, or dense ones next to a
         # sparse neighbour that keeps their samples apart) are balanced edge by edge.
         off = build.small | (settled & np.isfinite(measured) & (np.abs(measured - targets) > TOLERANCE))
+        off &= ~holes  # (an enclosed zone's lines are its lattice's: nothing to balance)
         # The edges' inside lengths are known already: balancing measures only new edges.
         points, triangles, segments, measured = balance_zones(
             points, triangles, meter, targets, width, off, known=edge_cache(best.edges, best.inside),
             growing=best.growing, limit=lambda segs: uncrowded(segs, build.dmap, width), fixed=best.fixed)
+    if holes.any():  # refinement's triangles may span a hole again
+        segments = segments[~_across(segments, build)]
     keep = uncrowded(segments, build.dmap, width)
-    if not keep.all():
-        segments = segments[keep]
+    if not keep.all() or holes.any():  # (the enclosed zones' lines go back in after the thinning)
+        segments = np.concatenate((segments[keep], extra))
         measured = meter.densities_of(meter.inside_all(segments), width)
     error = np.where(settled, np.abs(measured - targets), 0.0)
     return dataclasses.replace(best, points=points, triangles=triangles, segments=segments,
@@ -340,19 +382,50 @@ def _sample(area, radius_fn, seed: int, sampler: str, relax: int, growing: bool,
     return points, fixed, growing_delaunay(points) if growing else None
 
 
-def _triangulate(points: np.ndarray, growing, radius_fn, dmap: DensityMap, width: float):
+def _on_hole_borders(build: SeamlessBuild, points: np.ndarray, sampled_at: np.ndarray) -> np.ndarray:
+    """Samples (m, 2) mm on the enclosed zones' borders, spaced for the zones round them."""
+    return np.concatenate([np.zeros((0, 2))] + [
+        border_samples(build.zone_areas[k], points, float(build.radius_of(sampled_at[k])))
+        for k in np.flatnonzero(build.holes)])
+
+
+def _hole_lattices(build: SeamlessBuild, points: np.ndarray, triangles: np.ndarray, densities: np.ndarray,
+                   sampled_at: np.ndarray) -> np.ndarray:
+    """The enclosed zones' lattice lines (x, 2, 2) mm at their `densities`, joined to the samples round them."""
+    return np.concatenate([np.zeros((0, 2, 2))] + [
+        hole_lines(build.zone_areas[k], points, triangles, LATTICE_SPACING * float(build.radius_of(densities[k])),
+                   build.seed, float(build.radius_of(sampled_at[k]))) for k in np.flatnonzero(build.holes)])
+
+
+def _across(segments: np.ndarray, build: SeamlessBuild) -> np.ndarray:
+    """(k,) bool: segments (k, 2, 2) mm whose middle or quarter points lie inside an enclosed zone shrunk
+    by a quarter of the smallest radius (a line across it, not one along its border)."""
+    t = np.array([0.25, 0.5, 0.75])
+    probes = (segments[:, None, 0] + t[None, :, None] * (segments[:, None, 1] - segments[:, None, 0])).reshape(-1, 2)
+    core = build.cut.buffer(-0.25 * float(build.radius_of(float(build.targets.max()))), 4)
+    if core.is_empty:
+        return np.zeros(len(segments), bool)
+    return contains_xy(core, probes[:, 0], probes[:, 1]).reshape(-1, 3).any(axis=1)
+
+
+def _triangulate(points: np.ndarray, growing, radius_fn, dmap: DensityMap, width: float, cut=None, more: int = 0):
     """The pattern of samples (n, 2) mm: Delaunay triangles without hull slivers, and their edges.
 
     Crowded nodes are thinned before anything is measured (`uncrowded`): the calibration makes
     up for what they lose.  `growing` (`GrowingDelaunay`, optional): the samples' triangulation.
+    `cut` (optional): the enclosed zones, which no triangle's centre may lie in; `more`: how many of
+    the last points `growing` has not had yet (the samples on their borders).
 
     Returns
     -------
     (triangles, edges)
         Triangles (t, 3) and the edges kept (e, 2), indices into `points`.
     """
-    triangles = delaunay_triangles(points) if growing is None else growing.add(np.zeros((0, 2)))
+    triangles = delaunay_triangles(points) if growing is None else growing.add(points[len(points) - more:])
     triangles = _drop_slivers(points, triangles, radius_fn)
+    if cut is not None and len(triangles):  # none across an enclosed zone
+        centre = points[triangles].mean(axis=1)
+        triangles = triangles[~contains_xy(cut, centre[:, 0], centre[:, 1])]
     edges = unique_edges(triangles)
     return triangles, edges[uncrowded(points[edges], dmap, width)]
 

@@ -635,31 +635,38 @@ def test_thinning_leaves_a_lattice_whole_while_other_edges_can_go():
         < len(lattice_edges)
 
 
-def test_a_small_sparse_region_keeps_its_lattice_up_to_its_border():
-    """A 30 mm region at 20 % in a 60 % part is about four of its lattice sides across.  Kept a
-    radius off the denser zone (as before), its outer 3 mm held none of its own points, only long
-    edges fanning in from the 60 % border row; its lattice now reaches to a quarter radius of the
-    border, the 60 % samples keeping their distance.  Measured as `bench/bench_regions.py` does
-    (the frame model over the region, against a uniform 20 % pattern in the same window): a mean
-    of 0.811 over seeds 0-4 before, 0.872 now; the densities stay on target."""
+def test_a_small_sparse_region_is_its_own_lattice_up_to_its_border():
+    """A 30 mm region at 20 % in a 60 % part, about four of its lattice sides across, enclosed by the
+    denser zone.  Joined to it by Delaunay triangles, it held few points of its own and long edges
+    fanning in from the 60 % border row (0.811 of a uniform 20 % pattern's C_min / rho over seeds 0-4
+    in session 17, 0.872 with session 18's lattice to a quarter radius of the border).  Now the 60 %
+    zone is sampled around it as around a hole and the region gets its own lattice's lines up to its
+    border: inside it every line lies on that lattice, and measured as `bench/bench_regions.py` does
+    (the frame model over the region, against a uniform 20 % pattern in the same window) it is as
+    stiff per gram as the uniform pattern within 5 %; the densities stay on target."""
     from bench.stiffness import stiffness
+
+    from DelaunayInfill.sampling import lattice_frame
 
     part, region = box(0, 0, 100, 100), box(35, 35, 65, 65)
     ratios = []
     for seed in range(5):
         pattern = InfillPattern.build(part, 0.6, 0.4, regions=[(region, 0.2)], seed=seed)
-        offset = np.abs(pattern.points - 50.0)
-        in_band = (offset < 15.0).all(axis=1) & ~(offset < 12.0).all(axis=1)
-        assert in_band.sum() >= 2, seed
         lines = pattern.clip(part).segments
         zones = pattern.density_map.zones(part)
         for zone, target in zip(zones, pattern.density_map.densities, strict=True):
             length = MultiLineString([tuple(map(tuple, s)) for s in lines]).intersection(zone).length
-            assert length * 0.4 / zone.area == pytest.approx(target, abs=0.02)
+            assert length * 0.4 / zone.area == pytest.approx(target, abs=0.015)
+        # the lines well inside the region run along the lattice's three directions
+        inner = lines[(np.abs(lines - 50.0) < 12.0).all(axis=(1, 2))]
+        assert len(inner) >= 20
+        angle = np.arctan2(*(inner[:, 1] - inner[:, 0])[:, ::-1].T)
+        turn = np.mod(angle - lattice_frame(seed)[0], np.pi / 3)
+        assert np.minimum(turn, np.pi / 3 - turn).max() < 1e-6, seed
         uniform = InfillPattern.build(part, 0.2, 0.4, seed=seed).clip(part).segments
         ratios.append(stiffness(lines, 0.4, window=30.0, centre=(50.0, 50.0)).c_min
                       / stiffness(uniform, 0.4, window=30.0, centre=(50.0, 50.0)).c_min)
-    assert np.mean(ratios) >= 0.85
+    assert np.mean(ratios) >= 0.95, ratios
 
 
 def test_balancing_inserts_no_two_circumcentres_close_together():

@@ -112,6 +112,11 @@ def star_figure10_modifiers() -> list[Model]:
     return out
 
 
+def plate_model(name="plate.stl"):
+    """A 60 x 60 x 12 mm block."""
+    return Model(name, [(models.cube_outline(60.0), 0.0, 12.0)])
+
+
 def table_model(name="table.stl"):
     """A pillar under a wider slab: an overhang that needs support."""
     pillar = np.array([(-8.0, -8.0), (8.0, -8.0), (8.0, 8.0), (-8.0, 8.0)])
@@ -143,6 +148,9 @@ def matrix() -> dict[str, Case]:
         Case("firmware_retraction", [star_model()], {"machine_firmware_retract": True}),
         Case("zhop_no_combing", [hbracket_model()],
              {"retraction_hop_enabled": True, "retraction_hop": 0.4, "retraction_combing": "off"}),
+        # a sparse region enclosed by denser infill: printed as its own lattice up to its border
+        Case("sparse_region_enclosed", [plate_model(), modifier_box("box_enclosed.stl", 36.0, 36.0, 0.0, 0.0, 10.0)],
+             {"infill_sparse_density": 40}),
         Case("density_10", [hbracket_model()], {"infill_sparse_density": 10}),
         Case("density_50", [hbracket_model()], {"infill_sparse_density": 50}),
     ]

@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import subprocess
 
+import numpy as np
 import pytest
 
 from . import gcode_check as gc
@@ -79,6 +80,50 @@ def test_4_region_densities_within_two_points(processed, parsed_pair):
     print(f"\n[check 4] {case.name} {os.path.basename(processed.path)}: worst {worst:.2f} points; "
           + ", ".join(f"{name} {v[0]:g} -> {v[1]:.2f} %" for name, v in measured.items()))
     assert result.ok, result.report()
+
+
+@pytest.mark.parametrize("how", ["api", "cli"])
+def test_an_enclosed_sparse_region_prints_its_own_lattice(slices, how, tmp_path):
+    """A 36 mm box at 10 % inside a 60 mm block at 40 % (CuraEngine's modifier mesh): the lines well
+    inside the box run in the three directions of one triangular lattice, 60 degrees apart, in the
+    middle layers: 0.97 of their length within 10 degrees of them (a line's last piece bends to the node
+    of the 40 % zone it ends on), both ways.  Joined to the 40 % zone by Delaunay triangles, they fanned
+    from a few samples in every direction: 0.43 and 0.41 before the change, about what lines in random
+    directions have (1/3)."""
+    from shapely.geometry import Point
+
+    from DelaunayInfill import process_gcode
+
+    from .conftest import MATRIX, cli_arguments
+
+    sliced = slices.get(MATRIX["sparse_region_enclosed"])
+    with open(sliced.gcode, encoding="utf-8") as f:
+        original = f.read()
+    if how == "api":
+        text = "".join(process_gcode(split_like_cura(original))[0])
+    else:
+        out = tmp_path / "cli.gcode"
+        proc = subprocess.run([*cli_command(), "process", sliced.gcode, "-o", str(out), *cli_arguments(sliced)],
+                              capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        text = out.read_text(encoding="utf-8")
+    (region,) = sliced.case.regions()
+    core = region.polygon.buffer(-2.0)
+    fill = gc.parse_gcode(text).fill_moves(extruding=True)
+    middle = (fill[:, gc.C_Z] > 3.0) & (fill[:, gc.C_Z] < 9.0)
+    segments = fill[middle][:, [gc.C_X0, gc.C_Y0, gc.C_X1, gc.C_Y1]].reshape(-1, 2, 2)
+    inside = np.array([core.contains(Point(*m)) for m in segments.mean(axis=1)], dtype=bool)
+    d = segments[inside, 1] - segments[inside, 0]
+    length = np.hypot(*d.T)
+    assert length.sum() > 200.0, length.sum()
+    phase = np.mod(np.degrees(np.arctan2(d[:, 1], d[:, 0])), 60.0)
+    # the lattice's phase: the length-weighted circular mean of the directions on a 60 degree circle
+    turn = np.radians(phase * 6.0)
+    centre = np.degrees(np.arctan2((length * np.sin(turn)).sum(), (length * np.cos(turn)).sum())) / 6.0
+    off = np.abs(np.mod(phase - centre + 30.0, 60.0) - 30.0)
+    on_lattice = length[off < 10.0].sum() / length.sum()
+    print(f"\n[enclosed region] {how}: {on_lattice:.3f} of the length on one lattice")
+    assert on_lattice >= 0.75
 
 
 def test_5_marker_and_reprocessing_is_a_no_op(processed, parsed_pair, tmp_path):

@@ -1,0 +1,107 @@
+"""Sparse zones enclosed by denser ones (`DelaunayInfill.enclosed_zones`): which zones, and their lines."""
+
+import numpy as np
+import pytest
+from shapely.geometry import MultiLineString, Point, Polygon, box
+from shapely.ops import unary_union
+
+from DelaunayInfill.density import DensityMap, sampling_radius
+from DelaunayInfill.enclosed_zones import border_samples, enclosed_sparse_zones, hole_lines, lattice_edges
+from DelaunayInfill.geometry import to_multipolygon
+from DelaunayInfill.pattern import InfillPattern
+from DelaunayInfill.sampling import LATTICE_SPACING, lattice_points
+from DelaunayInfill.triangulation import delaunay_triangles
+
+PART = to_multipolygon(box(0, 0, 100, 100))
+
+
+def _enclosed(base, regions, part=PART):
+    dmap = DensityMap.create(base, regions)
+    radii = np.array([sampling_radius(d, 0.4) for d in dmap.densities])
+    zones = dmap.zones(part)
+    return enclosed_sparse_zones(dmap, zones, part, radii, np.array([not z.is_empty for z in zones]))
+
+
+def test_a_sparse_region_inside_a_denser_part_is_enclosed_by_the_part():
+    assert _enclosed(0.4, [(box(30, 30, 66, 66), 0.1)]).tolist() == [-1, 0]
+
+
+@pytest.mark.parametrize("regions", [
+    [(box(0, 30, 36, 66), 0.1)],  # on the part's edge: a base of the part, not enclosed
+    [(box(30, 30, 66, 66), 0.6)],  # denser than the part
+    [(box(48, 48, 52, 52), 0.1)],  # too small for its lattice (under 4 squared radii)
+])
+def test_a_region_on_the_edge_denser_or_too_small_is_not(regions):
+    assert (_enclosed(0.4, regions) == -1).all()
+
+
+def test_a_region_beside_a_sparser_one_is_not_but_the_sparser_one_inside_both_is():
+    regions = [(box(20, 20, 80, 80), 0.2), (box(30, 30, 70, 70), 0.1), (box(50, 20, 80, 80), 0.3)]
+    # the 10 % box's visible half touches the 20 % and the 30 % zones (both denser): enclosed, mostly by the 20 %
+    # one; the 20 % zone touches the 10 % box and the part's 40 %: not enclosed
+    assert _enclosed(0.4, regions).tolist() == [-1, -1, 1, -1]
+
+
+def test_lattice_edges_are_the_lattice_sides_between_its_nodes_each_once():
+    side, seed = 5.0, 3
+    edges = lattice_edges(box(0, 0, 30, 30), side, seed)
+    assert np.allclose(np.hypot(*(edges[:, 1] - edges[:, 0]).T), side)
+    nodes = lattice_points(box(-10, -10, 40, 40), side, seed)
+    ends = edges.reshape(-1, 2)
+    assert np.min(np.linalg.norm(ends[:, None] - nodes[None], axis=2), axis=1).max() < 1e-9
+    keys = {tuple(sorted(map(tuple, np.round(e, 6).tolist()))) for e in edges}
+    assert len(keys) == len(edges)
+
+
+def test_border_samples_keep_their_distance_and_lie_on_the_border():
+    zone = to_multipolygon(Point(50, 50).buffer(15, 32))
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0, 100, (400, 2))
+    points = points[~np.array([zone.contains(Point(*p)) for p in points])]
+    border = border_samples(zone, points, 2.0)
+    assert len(border) >= 20
+    assert np.allclose([zone.boundary.distance(Point(*b)) for b in border], 0.0, atol=1e-9)
+    gaps = np.linalg.norm(border[:, None] - np.concatenate((points, border))[None], axis=2)
+    gaps[np.arange(len(border)), len(points) + np.arange(len(border))] = np.inf
+    assert gaps.min() >= 0.6 * 2.0 - 1e-9
+
+
+def test_hole_lines_stay_out_of_the_denser_triangles_and_end_on_their_nodes():
+    zone = to_multipolygon(box(32, 32, 68, 68))
+    dense_side = 3.5
+    points = lattice_points(box(0, 0, 100, 100).difference(zone), dense_side, 1)
+    triangles = delaunay_triangles(points)
+    corners = points[triangles]
+    longest = np.max(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2), axis=1)
+    triangles = triangles[longest < 1.1 * dense_side]  # (the ones across the zone go)
+    reach = dense_side / LATTICE_SPACING
+    lines = hole_lines(zone, points, triangles, 14.0, 1, reach)
+    assert len(lines) > 10
+    inside = to_multipolygon(unary_union([Polygon(c) for c in points[triangles]])).buffer(-1e-6)
+    assert MultiLineString([tuple(map(tuple, s)) for s in lines]).intersection(inside).length < 1e-6
+    # every end outside the zone is one of the denser zone's nodes or of the zone's own lattice
+    ends = lines.reshape(-1, 2)
+    out = ~np.array([zone.buffer(1e-9).contains(Point(*e)) for e in ends])
+    nodes = np.concatenate((points, lattice_points(box(0, 0, 100, 100), 14.0, 1)))
+    assert (np.min(np.linalg.norm(ends[out][:, None] - points[None], axis=2), axis=1) < 1e-9).sum() >= 10
+    assert np.min(np.linalg.norm(ends[out][:, None] - nodes[None], axis=2), axis=1).max() < 1e-9
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_an_enclosed_region_prints_its_density_and_nothing_crosses_it(seed):
+    """Built whole: the region's and the part's densities on target, no line of the denser zone
+    across the region (every line inside the region shrunk by a millimetre is the region's lattice's,
+    as long as its side)."""
+    region = box(32, 32, 68, 68)
+    pattern = InfillPattern.build(PART, 0.4, 0.4, regions=[(region, 0.1)], seed=seed)
+    lines = pattern.clip(PART).segments
+    for zone, target in zip(pattern.density_map.zones(PART), pattern.density_map.densities, strict=True):
+        length = MultiLineString([tuple(map(tuple, s)) for s in lines]).intersection(zone).length
+        assert length * 0.4 / zone.area == pytest.approx(target, abs=0.015)
+    side = LATTICE_SPACING * sampling_radius(0.1, 0.4)
+    core = region.buffer(-1.0)
+    crossing = [s for s in lines if core.intersects(MultiLineString([tuple(map(tuple, s))]))]
+    length = np.array([np.hypot(*(s[1] - s[0])) for s in crossing])
+    # the region's own sides (calibration scales them a little) and pieces of them cut at the border
+    assert (length < 1.2 * side).all()
+    assert (np.abs(length / side - 1.0) < 0.2).sum() >= 10

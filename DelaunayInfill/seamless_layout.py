@@ -4,9 +4,9 @@
 
 1. `plan`: what every sampling of the build shares: the zones' meter where the
    lines are printed, the area sampled (the footprint grown by the largest
-   radius), what kind of calibration each zone allows and which sparse zones
-   are enclosed by denser ones (`enclosed_zones`: sampled as holes, filled
-   with their own lattice).
+   radius), what kind of calibration each zone allows and which zones are
+   sparser or denser than all round them (`enclosed_zones`: sampled round as
+   holes, each its own lattice).
 2. `calibrated`: samplings at corrected densities (`sampled`, one sampling,
    its triangulation and how far each zone is off) while they bring the zones
    closer to their targets; the best is kept.
@@ -29,8 +29,8 @@ import numpy as np
 from shapely.ops import unary_union
 
 from .calibration import TOLERANCE, balance_zones, edge_cache, fine_tune_scale, scale_limit, settled_bands
-from .density import DensityMap, sampling_radius, shortest_edges
-from .enclosed_zones import border_samples, enclosed_sparse_zones, hole_lines
+from .density import LATTICE_SIDE, DensityMap, sampling_radius, shortest_edges
+from .enclosed_zones import BORDER_GAP, border_samples, enclosed_zones, hole_lines, lattice_patch
 from .geometry import contains_xy, to_multipolygon
 from .metering import meter_for
 from .sampling import LATTICE_SPACING, sample_lattice, sample_poisson_disk, sample_triangulated
@@ -108,12 +108,14 @@ class SeamlessBuild:
     growing : bool
         The samplings keep a growing triangulation (balancing refines it).
     surround : ndarray of int, shape (zones,)
-        For a sparse zone enclosed by denser ones (`enclosed_zones`), the zone whose density it is
-        sampled at (it is a hole in the sampling, filled with its own lattice afterwards); else -1.
+        For a zone enclosed by denser ones or by sparser ones (`enclosed_zones`), the zone whose density
+        it is sampled at (it is a hole in the sampling, filled with its own lattice); else -1.
     zone_areas : tuple of MultiPolygon
         The zones over the sampling area (`DensityMap.zones`), for the enclosed ones.
     cut : shapely MultiPolygon or None
-        The enclosed zones together.
+        The enclosed zones together (a dense one as its patch).
+    patches : dict of int to LatticePatch
+        The dense enclosed zones' own lattices (`enclosed_zones.lattice_patch`).
     """
 
     area: object
@@ -136,6 +138,7 @@ class SeamlessBuild:
     surround: np.ndarray = None
     zone_areas: tuple = ()
     cut: object = None
+    patches: dict = dataclasses.field(default_factory=dict)
 
     def radius_of(self, density):
         """Poisson-disk radius (mm) first taken for `density` (fraction or array of them)."""
@@ -152,8 +155,13 @@ class SeamlessBuild:
         return TOLERANCE if self.single else _LOOP_TOLERANCE
 
     @property
+    def patched(self) -> np.ndarray:
+        """(zones,) bool: the dense enclosed zones, printed as their `patches`."""
+        return np.isin(np.arange(len(self.targets)), list(self.patches))
+
+    @property
     def holes(self) -> np.ndarray:
-        """(zones,) bool: the enclosed sparse zones."""
+        """(zones,) bool: the enclosed zones."""
         return np.zeros(len(self.targets), bool) if self.surround is None else self.surround >= 0
 
 
@@ -173,8 +181,11 @@ def build_seamless(area, dmap: DensityMap, width: float, seed: int, calibration:
     done = finished(build, calibrated(build))
     if build.sampler == "lattice" and build.growing and build.several:
         # (a coarse zone's band: one sampling to the next moves it by jumps, as the zone itself)
+        # (a zone round a dense zone's own lattice prints that lattice's reach in its band: not a chance to undo)
+        hosts = np.isin(np.arange(len(build.targets)), build.surround[build.patched])
         done = settled_bands(done, lambda between_seed: finished(build, calibrated(build, between_seed)),
-                             dmap.zones(printed), build.targets, width, build.settled & ~build.coarse, printed)
+                             dmap.zones(printed), build.targets, width, build.settled & ~build.coarse & ~hosts,
+                             printed)
     return done
 
 
@@ -207,16 +218,20 @@ def plan(area, dmap: DensityMap, width: float, seed: int, calibration: str, rela
     # A single zone is calibrated by scaling one sampling (continuous, cheap) as soon as
     # the scale needed is within reach; re-sampling only moves it by jumps of 1-2 points.
     single = calibration == "measured" and np.count_nonzero(settled) == 1
-    surround, zone_areas, cut = None, (), None
+    surround, zone_areas, cut, patches = None, (), None, {}
     if sampler == "lattice" and calibration == "measured" and several and not relax:
         zone_areas = tuple(dmap.zones(sampling_area))
-        surround = enclosed_sparse_zones(dmap, list(zone_areas), area, np.sqrt(radius_squared), settled)
+        surround, patches = _enclosed(dmap, zone_areas, area, np.sqrt(radius_squared), settled, width, seed)
         if (surround >= 0).any():  # (sampled round, as holes)
-            cut = to_multipolygon(unary_union([zone_areas[k] for k in np.flatnonzero(surround >= 0)]))
-            sampling_area = to_multipolygon(sampling_area.difference(cut))
+            cut = to_multipolygon(unary_union([patches[k].area if k in patches else zone_areas[k]
+                                               for k in np.flatnonzero(surround >= 0)]))
+            # the sparser samples keep their distance from a patch: its outline's nodes join them
+            clear = [patch.area.buffer(BORDER_GAP * math.sqrt(radius_squared[surround[k]]), 4)
+                     for k, patch in patches.items()]
+            sampling_area = to_multipolygon(sampling_area.difference(unary_union([cut, *clear])))
     return SeamlessBuild(area, printed, dmap, width, seed, calibration, relax, sampler, meter, sampling_area,
                          targets, settled, small, coarse, bool(single), scale_limit(area, reach),
-                         not single and calibration == "measured", surround, zone_areas, cut)
+                         not single and calibration == "measured", surround, zone_areas, cut, patches)
 
 
 def sampled(build: SeamlessBuild, factors: np.ndarray, iteration: int, between_seed: int | None = None) -> Sampling:
@@ -237,6 +252,8 @@ def sampled(build: SeamlessBuild, factors: np.ndarray, iteration: int, between_s
     points = np.concatenate((points, border))
     triangles, edges = _triangulate(points, growing, radius_fn, build.dmap, build.width, build.cut, len(border))
     extra = _hole_lattices(build, points, triangles, densities, sampled_at)
+    if build.patches:
+        edges = edges[~_along_patches(points[edges], build)]
     segments = np.concatenate((points[edges], extra))
     inside = build.meter.inside_all(segments)
     measured = build.meter.densities_of(inside, build.width)
@@ -244,7 +261,8 @@ def sampled(build: SeamlessBuild, factors: np.ndarray, iteration: int, between_s
     error = np.abs(measured - build.targets)
     # Small zones above target can be thinned afterwards; shortfalls cannot.
     error = np.where(build.small & (measured > build.targets), 0.25 * error, error)
-    worst = float(np.nanmax(np.where(build.settled, error, 0.0))) if len(error) else 0.0
+    # (a dense zone's patch is its exact lattice: no factor moves it)
+    worst = float(np.nanmax(np.where(build.settled & ~build.patched, error, 0.0))) if len(error) else 0.0
     return Sampling(worst, points, triangles, segments, measured, iteration, edges, inside, growing, fixed,
                     factors.copy(), extra=extra)
 
@@ -329,8 +347,12 @@ def finished(build: SeamlessBuild, best: Sampling) -> Sampling:
             growing=best.growing, limit=lambda segs: uncrowded(segs, build.dmap, width), fixed=best.fixed)
     if holes.any():  # refinement's triangles may span a hole again
         segments = segments[~_across(segments, build)]
-    keep = uncrowded(segments, build.dmap, width)
-    if not keep.all() or holes.any():  # (the enclosed zones' lines go back in after the thinning)
+        if build.patches:
+            segments = segments[~_along_patches(segments, build)]
+    # (the enclosed zones' lines count at their nodes but stay: they are those zones' lattices)
+    keep = uncrowded(np.concatenate((segments, extra)), build.dmap, width,
+                     fixed=np.arange(len(segments) + len(extra)) >= len(segments))[:len(segments)]
+    if not keep.all() or holes.any():
         segments = np.concatenate((segments[keep], extra))
         measured = meter.densities_of(meter.inside_all(segments), width)
     error = np.where(settled, np.abs(measured - targets), 0.0)
@@ -338,9 +360,11 @@ def finished(build: SeamlessBuild, best: Sampling) -> Sampling:
                                measured=np.asarray(measured), worst=float(np.nanmax(error)) if len(error) else 0.0)
 
 
-def uncrowded(segments: np.ndarray, dmap: DensityMap, width: float) -> np.ndarray:
-    """`uncrowded_edges` of segments (k, 2, 2) mm, the shortest a quarter of the local spacing: keep mask (k,)."""
-    return uncrowded_edges(segments, shortest_edges(segments, dmap, width))
+def uncrowded(segments: np.ndarray, dmap: DensityMap, width: float, fixed: np.ndarray | None = None) -> np.ndarray:
+    """`uncrowded_edges` of segments (k, 2, 2) mm, the shortest a quarter of the local spacing: keep mask (k,).
+
+    `fixed` (k,) bool, optional: segments never left out (they count at their nodes)."""
+    return uncrowded_edges(segments, shortest_edges(segments, dmap, width), fixed=fixed)
 
 
 def _sample(area, radius_fn, seed: int, sampler: str, relax: int, growing: bool, between_seed: int | None = None):
@@ -382,17 +406,43 @@ def _sample(area, radius_fn, seed: int, sampler: str, relax: int, growing: bool,
     return points, fixed, growing_delaunay(points) if growing else None
 
 
+def _enclosed(dmap: DensityMap, zone_areas: tuple, area, radii: np.ndarray, settled: np.ndarray, width: float,
+              seed: int) -> tuple[np.ndarray, dict]:
+    """The zones sampled round as holes (`SeamlessBuild.surround`) and the dense ones' lattice patches
+    (`SeamlessBuild.patches`)."""
+    surround = enclosed_zones(dmap, list(zone_areas), area, radii, settled, denser=False)
+    dense = enclosed_zones(dmap, list(zone_areas), area, radii, settled, denser=True)
+    patches = {}
+    for k in np.flatnonzero(dense >= 0).tolist():
+        patch = lattice_patch(zone_areas[k], LATTICE_SIDE * width / float(dmap.densities[k]), seed)
+        if patch is not None:
+            patches[k] = patch
+            surround[k] = dense[k]
+    return surround, patches
+
+
 def _on_hole_borders(build: SeamlessBuild, points: np.ndarray, sampled_at: np.ndarray) -> np.ndarray:
     """Samples (m, 2) mm on the enclosed zones' borders, spaced for the zones round them."""
     return np.concatenate([np.zeros((0, 2))] + [
+        build.patches[k].joins(build.zone_areas[k], points, float(build.radius_of(sampled_at[k])))
+        if k in build.patches else
         border_samples(build.zone_areas[k], points, float(build.radius_of(sampled_at[k])))
         for k in np.flatnonzero(build.holes)])
+
+
+def _along_patches(segments: np.ndarray, build: SeamlessBuild) -> np.ndarray:
+    """(k,) bool: segments (k, 2, 2) mm along a dense zone's patch (`LatticePatch.along`)."""
+    out = np.zeros(len(segments), bool)
+    for patch in build.patches.values():
+        out |= patch.along(segments)
+    return out
 
 
 def _hole_lattices(build: SeamlessBuild, points: np.ndarray, triangles: np.ndarray, densities: np.ndarray,
                    sampled_at: np.ndarray) -> np.ndarray:
     """The enclosed zones' lattice lines (x, 2, 2) mm at their `densities`, joined to the samples round them."""
     return np.concatenate([np.zeros((0, 2, 2))] + [
+        build.patches[k].lines if k in build.patches else
         hole_lines(build.zone_areas[k], points, triangles, LATTICE_SPACING * float(build.radius_of(densities[k])),
                    build.seed, float(build.radius_of(sampled_at[k]))) for k in np.flatnonzero(build.holes)])
 

@@ -252,7 +252,7 @@ def node_edge_counts(segments: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 def uncrowded_edges(segments: np.ndarray, shortest: np.ndarray | float = 0.0, *, max_edges: int = 8,
-                    min_edges: int = 3) -> np.ndarray:
+                    min_edges: int = 3, fixed: np.ndarray | None = None) -> np.ndarray:
     """Which segments to keep so that no node has more than `max_edges` and none is too short.
 
     Where a point ends up among closer neighbours than the sampling radius
@@ -273,6 +273,8 @@ def uncrowded_edges(segments: np.ndarray, shortest: np.ndarray | float = 0.0, *,
     shortest : float or ndarray, shape (k,)
         Shortest length kept per segment, mm (0: no length limit).
     max_edges, min_edges : int
+    fixed : ndarray of bool, shape (k,), optional
+        Segments that count at their nodes but are never left out.
 
     Returns
     -------
@@ -284,7 +286,8 @@ def uncrowded_edges(segments: np.ndarray, shortest: np.ndarray | float = 0.0, *,
         return keep
     nodes, ends, counts = node_edge_counts(segments)
     length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
-    too_short = np.flatnonzero(length < np.broadcast_to(np.asarray(shortest, dtype=float), length.shape))
+    fixed = np.zeros(len(segments), bool) if fixed is None else np.asarray(fixed, bool)
+    too_short = np.flatnonzero((length < np.broadcast_to(np.asarray(shortest, dtype=float), length.shape)) & ~fixed)
     crowded = np.flatnonzero(counts > max_edges)
     if crowded.size == 0 and too_short.size == 0:
         return keep
@@ -300,7 +303,7 @@ def uncrowded_edges(segments: np.ndarray, shortest: np.ndarray | float = 0.0, *,
             angle = np.arctan2(d[order, 1], d[order, 0])
             gap = np.diff(np.append(angle, angle[0] + 2 * np.pi))  # gap after each edge
             closed = gap + np.roll(gap, 1)  # the gap that leaving an edge out opens
-            closed[counts[other] <= min_edges] = np.inf
+            closed[(counts[other] <= min_edges) | fixed[mine]] = np.inf
             if not np.isfinite(closed).any():
                 break
             # The shortest of the edges whose leaving out opens no gap wider than a quarter turn (it

@@ -1,25 +1,25 @@
-"""Sparse zones enclosed by denser ones (`DelaunayInfill.enclosed_zones`): which zones, and their lines."""
+"""Zones enclosed by denser or by sparser ones (`DelaunayInfill.enclosed_zones`): which zones, and their lines."""
 
 import numpy as np
 import pytest
 from shapely.geometry import MultiLineString, Point, Polygon, box
 from shapely.ops import unary_union
 
-from DelaunayInfill.density import DensityMap, sampling_radius
-from DelaunayInfill.enclosed_zones import border_samples, enclosed_sparse_zones, hole_lines, lattice_edges
+from DelaunayInfill.density import LATTICE_SIDE, DensityMap, sampling_radius
+from DelaunayInfill.enclosed_zones import border_samples, enclosed_zones, hole_lines, lattice_edges, lattice_patch
 from DelaunayInfill.geometry import to_multipolygon
 from DelaunayInfill.pattern import InfillPattern
-from DelaunayInfill.sampling import LATTICE_SPACING, lattice_points
+from DelaunayInfill.sampling import LATTICE_SPACING, lattice_frame, lattice_points
 from DelaunayInfill.triangulation import delaunay_triangles
 
 PART = to_multipolygon(box(0, 0, 100, 100))
 
 
-def _enclosed(base, regions, part=PART):
+def _enclosed(base, regions, part=PART, denser=False):
     dmap = DensityMap.create(base, regions)
     radii = np.array([sampling_radius(d, 0.4) for d in dmap.densities])
     zones = dmap.zones(part)
-    return enclosed_sparse_zones(dmap, zones, part, radii, np.array([not z.is_empty for z in zones]))
+    return enclosed_zones(dmap, zones, part, radii, np.array([not z.is_empty for z in zones]), denser)
 
 
 def test_a_sparse_region_inside_a_denser_part_is_enclosed_by_the_part():
@@ -33,6 +33,12 @@ def test_a_sparse_region_inside_a_denser_part_is_enclosed_by_the_part():
 ])
 def test_a_region_on_the_edge_denser_or_too_small_is_not(regions):
     assert (_enclosed(0.4, regions) == -1).all()
+
+
+def test_a_dense_region_inside_a_sparser_part_is_enclosed_the_other_way():
+    assert _enclosed(0.2, [(box(30, 30, 66, 66), 0.6)], denser=True).tolist() == [-1, 0]
+    assert _enclosed(0.2, [(box(30, 30, 66, 66), 0.6)], denser=False).tolist() == [-1, -1]
+    assert _enclosed(0.2, [(box(0, 30, 36, 66), 0.6)], denser=True).tolist() == [-1, -1]  # on the edge
 
 
 def test_a_region_beside_a_sparser_one_is_not_but_the_sparser_one_inside_both_is():
@@ -87,17 +93,24 @@ def test_hole_lines_stay_out_of_the_denser_triangles_and_end_on_their_nodes():
     assert np.min(np.linalg.norm(ends[out][:, None] - nodes[None], axis=2), axis=1).max() < 1e-9
 
 
+def _built_on_target(base, region, density, seed):
+    """The pattern of PART at `base` with one region, clipped (k, 2, 2) mm; both zones measured whole
+    within 1.5 points of their densities."""
+    pattern = InfillPattern.build(PART, base, 0.4, regions=[(region, density)], seed=seed)
+    lines = pattern.clip(PART).segments
+    for zone, target in zip(pattern.density_map.zones(PART), pattern.density_map.densities, strict=True):
+        length = MultiLineString([tuple(map(tuple, s)) for s in lines]).intersection(zone).length
+        assert length * 0.4 / zone.area == pytest.approx(target, abs=0.015)
+    return lines
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_an_enclosed_region_prints_its_density_and_nothing_crosses_it(seed):
     """Built whole: the region's and the part's densities on target, no line of the denser zone
     across the region (every line inside the region shrunk by a millimetre is the region's lattice's,
     as long as its side)."""
     region = box(32, 32, 68, 68)
-    pattern = InfillPattern.build(PART, 0.4, 0.4, regions=[(region, 0.1)], seed=seed)
-    lines = pattern.clip(PART).segments
-    for zone, target in zip(pattern.density_map.zones(PART), pattern.density_map.densities, strict=True):
-        length = MultiLineString([tuple(map(tuple, s)) for s in lines]).intersection(zone).length
-        assert length * 0.4 / zone.area == pytest.approx(target, abs=0.015)
+    lines = _built_on_target(0.4, region, 0.1, seed)
     side = LATTICE_SPACING * sampling_radius(0.1, 0.4)
     core = region.buffer(-1.0)
     crossing = [s for s in lines if core.intersects(MultiLineString([tuple(map(tuple, s))]))]
@@ -105,3 +118,71 @@ def test_an_enclosed_region_prints_its_density_and_nothing_crosses_it(seed):
     # the region's own sides (calibration scales them a little) and pieces of them cut at the border
     assert (length < 1.2 * side).all()
     assert (np.abs(length / side - 1.0) < 0.2).sum() >= 10
+
+
+def test_a_lattice_patch_is_the_lattice_triangles_with_two_corners_in_the_zone():
+    """Every line a lattice side; each lattice triangle with at least two corners in the zone is in
+    the patch and no other, so the patch covers the zone but for corners of triangles with one corner
+    in it (within a side of the border) and reaches past the border by at most a triangle's height."""
+    zone = to_multipolygon(Point(50, 50).buffer(12, 32))
+    side, seed = 2.5, 4
+    patch = lattice_patch(zone, side, seed)
+    assert np.allclose(np.hypot(*(patch.lines[:, 1] - patch.lines[:, 0]).T), side)
+    nodes = lattice_points(box(0, 0, 100, 100), side, seed)
+    triangles = nodes[delaunay_triangles(nodes)]
+    inside = np.array([[zone.contains(Point(*c)) for c in t] for t in triangles]).sum(axis=1)
+    centres = triangles.mean(axis=1)
+    in_patch = np.array([patch.area.contains(Point(*c)) for c in centres])
+    assert (in_patch == (inside >= 2)).all()
+    assert zone.buffer(-side).difference(patch.area).area < 1e-9
+    assert zone.buffer(np.sqrt(3) / 2 * side + 1e-6).covers(patch.area)
+    # the outline's nodes: lattice nodes on the patch's boundary, all of them
+    assert np.allclose([patch.area.boundary.distance(Point(*p)) for p in patch.outline], 0.0, atol=1e-9)
+    ends = np.unique(np.round(patch.lines.reshape(-1, 2), 6), axis=0)
+    on_boundary = np.array([patch.area.boundary.distance(Point(*p)) < 1e-6 for p in ends])
+    assert on_boundary.sum() == len(patch.outline)
+
+
+def test_a_patch_s_chords_are_told_from_lines_leaving_it():
+    """Between two of the outline's nodes along the patch or across it: its own lines are there."""
+    zone = to_multipolygon(box(30, 30, 60, 60))
+    patch = lattice_patch(zone, 3.0, 1)
+    a, b = patch.outline[0], patch.outline[np.argsort(np.linalg.norm(patch.outline - patch.outline[0], axis=1))[3]]
+    outward = a + 4.0 * (a - np.array([45.0, 45.0])) / np.linalg.norm(a - np.array([45.0, 45.0]))
+    far = patch.outline[np.argmax(np.linalg.norm(patch.outline - a, axis=1))]  # across the patch
+    segments = np.array([[a, b], [a, outward], [outward, a + 0.1], [a, far]])
+    assert patch.along(segments).tolist() == [True, False, False, True]
+
+
+def test_a_patch_joins_at_outline_nodes_a_radius_apart_clear_of_the_samples():
+    zone = to_multipolygon(box(30, 30, 60, 60))
+    patch = lattice_patch(zone, 2.0, 2)
+    radius = 6.0
+    points = np.array([[29.0, 45.0], [45.0, 80.0]])  # one close to the left side
+    chosen = patch.joins(zone, points, radius)
+    assert len(chosen) >= 0.8 * zone.length / radius - 1
+    assert np.min(np.linalg.norm(chosen[:, None] - patch.outline[None], axis=2), axis=1).max() < 1e-9
+    assert np.linalg.norm(chosen[:, None] - points[None], axis=2).min() >= 0.6 * radius
+    gaps = np.linalg.norm(chosen[:, None] - chosen[None], axis=2) + np.eye(len(chosen)) * 1e9
+    assert gaps.min() > 0.3 * radius
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_dense_region_prints_its_density_as_its_own_lattice(seed):
+    """A 60 % region in a 20 % part: both densities on target measured whole, every line that meets the
+    region but for its outer side's strip a side of one lattice (none of the sparser zone's lines crosses
+    into it: they end on the lattice's outline), the lattice reaching past the border by at most a
+    triangle's height."""
+    region = box(35, 35, 65, 65)
+    lines = _built_on_target(0.2, region, 0.6, seed)
+    side = LATTICE_SIDE * 0.4 / 0.6
+    core = region.buffer(-side)
+    meets = np.array([core.intersects(MultiLineString([tuple(map(tuple, s))])) for s in lines])
+    assert meets.sum() > 400
+    length = np.hypot(*(lines[meets, 1] - lines[meets, 0]).T)
+    assert np.allclose(length, side)
+    angle = np.arctan2(*(lines[meets, 1] - lines[meets, 0])[:, ::-1].T)
+    turn = np.mod(angle - lattice_frame(seed)[0], np.pi / 3)
+    assert np.minimum(turn, np.pi / 3 - turn).max() < 1e-6
+    reach = np.sqrt(3) / 2 * side + 1e-6
+    assert region.buffer(reach).covers(MultiLineString([tuple(map(tuple, s)) for s in lines[meets]]))

@@ -9,6 +9,7 @@ from shapely.geometry import MultiLineString, Point, Polygon, box
 from shapes import SHAPES, star, star_regions
 
 from DelaunayInfill import InfillPattern, generate_infill
+from DelaunayInfill.density import LATTICE_SIDE
 from DelaunayInfill.decomposition import cross_turn, decompose_convex, is_convex, reflex_vertices
 from DelaunayInfill.geometry import contains_xy, unary_union
 from DelaunayInfill.metering import measured_density
@@ -261,38 +262,51 @@ _WHOLE_REGION_CASES = {
 @pytest.mark.parametrize("case", list(_WHOLE_REGION_CASES))
 def test_whole_regions_print_their_density(case, seed):
     """Issue 15: a region measured whole (the band where the pattern changes included) and the rest
-    of the part both print their density within 2 points; the sparse side stays sparse next to the
-    border (its 2 mm along it within 5 points of its density: the change lies on the dense side)."""
+    of the part both print their density within 2 points; the region prints its own density right up
+    to its border (its 2 mm along it within 5 points: the change lies outside it) and the sparse side
+    stays sparse beside it (2 mm along the border, or beyond a dense region's last lattice triangles,
+    which reach past its border by up to their height)."""
     base, region, density = _WHOLE_REGION_CASES[case]
     part = box(0, 0, 80, 80)
     printed = InfillPattern.build(part, base, 0.4, regions=[(region, density)], seed=seed).clip(part).segments
     rest = part.difference(region)
     assert abs(measured_density(printed, region, 0.4) - density) <= 0.02
     assert abs(measured_density(printed, rest, 0.4) - base) <= 0.02
-    sparse_band = (rest.intersection(region.buffer(2.0)) if density > base
-                   else region.difference(region.buffer(-2.0)))
+    inner_band = region.difference(region.buffer(-2.0))
+    assert abs(measured_density(printed, inner_band, 0.4) - density) <= 0.05
+    height = math.sqrt(3.0) / 2.0 * LATTICE_SIDE * 0.4 / max(base, density) if density > base else 0.0
+    sparse_band = (rest.intersection(region.buffer(height + 2.0)).difference(region.buffer(height))
+                   if density > base else inner_band)
     assert measured_density(printed, sparse_band, 0.4) <= min(base, density) + 0.05
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 @pytest.mark.parametrize("case", list(_WHOLE_REGION_CASES))
-def test_the_change_of_density_lies_on_the_denser_side(case, seed):
-    """Issue 15: across a region's border the sparse side's first band one sparse spacing s wide (the
-    sparse lattice's side 2 sqrt(3) w / d) prints the sparse density within 2 points, and so does the
-    dense side from s on: the change lies in the dense side's first band.  (The sparse band swung by
-    up to 4.6 points from seed to seed before; a uniform pattern's same band by 0.3.)"""
+def test_the_change_of_density_lies_in_one_band_beside_the_border(case, seed):
+    """Issue 15: across a region's border the sparse side prints the sparse density within 2 points
+    (2.5 beside a dense region) in a band one sparse spacing s wide (the sparse lattice's side
+    2 sqrt(3) w / d), and so does the dense side from s on: the change lies in one band.  Beside a
+    sparse region, or a dense one on the part's edge, that band is the dense side's first; a dense
+    region enclosed by the part is its own lattice in whole triangles, so the change lies in the
+    triangles' reach past its border (up to their height h), and the sparse band starts there.  (The
+    sparse band swung by up to 4.6 points from seed to seed before session 12; a uniform pattern's
+    same band by 0.3.)"""
     base, region, density = _WHOLE_REGION_CASES[case]
     part = box(0, 0, 80, 80)
     printed = InfillPattern.build(part, base, 0.4, regions=[(region, density)], seed=seed).clip(part).segments
     sparse, dense = min(base, density), max(base, density)
     s = 2.0 * math.sqrt(3.0) * 0.4 / sparse
     inner = part.buffer(-s)  # (the part's own edge stays out of the bands)
+    tolerance = 0.02
     if density > base:
-        sparse_band, dense_beyond = region.buffer(s).difference(region), region.buffer(-s)
+        enclosed = part.buffer(-1.0).covers(region)
+        h = math.sqrt(3.0) / 2.0 * LATTICE_SIDE * 0.4 / dense if enclosed else 0.0
+        tolerance = 0.025 if enclosed else tolerance
+        sparse_band, dense_beyond = region.buffer(h + s).difference(region.buffer(h)), region.buffer(-s)
     else:
         sparse_band, dense_beyond = region.difference(region.buffer(-s)), part.difference(region.buffer(s))
     got = measured_density(printed, sparse_band.intersection(inner), 0.4)
-    assert abs(got - sparse) <= 0.02, (got, sparse)
+    assert abs(got - sparse) <= tolerance, (got, sparse)
     dense_beyond = dense_beyond.intersection(inner)
     if dense_beyond.area > (2 * s) ** 2:
         got = measured_density(printed, dense_beyond, 0.4)
@@ -667,6 +681,27 @@ def test_a_small_sparse_region_is_its_own_lattice_up_to_its_border():
         ratios.append(stiffness(lines, 0.4, window=30.0, centre=(50.0, 50.0)).c_min
                       / stiffness(uniform, 0.4, window=30.0, centre=(50.0, 50.0)).c_min)
     assert np.mean(ratios) >= 0.95, ratios
+
+
+def test_a_dense_region_is_as_stiff_per_gram_as_a_uniform_pattern_of_its_density():
+    """A 30 mm region at 60 % in a 20 % part, enclosed by it: its own lattice in whole triangles
+    (`enclosed_zones.lattice_patch`).  Measured as `bench/bench_regions.py` does (the frame model in a
+    window exactly over the region, against a uniform 60 % pattern in the same window): 0.909 over
+    seeds 0-4 in session 20, when the lattice ended a radius short of the border, 0.98 now; the
+    densities stay on target."""
+    from bench.stiffness import stiffness
+
+    part, region = box(0, 0, 100, 100), box(35, 35, 65, 65)
+    ratios = []
+    for seed in range(3):
+        pattern = InfillPattern.build(part, 0.2, 0.4, regions=[(region, 0.6)], seed=seed)
+        lines = pattern.clip(part).segments
+        for zone, target in zip(pattern.density_map.zones(part), pattern.density_map.densities, strict=True):
+            assert measured_density(lines, zone, 0.4) == pytest.approx(target, abs=0.015)
+        uniform = InfillPattern.build(part, 0.6, 0.4, seed=seed).clip(part).segments
+        ratios.append(stiffness(lines, 0.4, window=30.0, centre=(50.0, 50.0)).c_min
+                      / stiffness(uniform, 0.4, window=30.0, centre=(50.0, 50.0)).c_min)
+    assert min(ratios) >= 0.95, ratios
 
 
 def test_balancing_inserts_no_two_circumcentres_close_together():

@@ -153,6 +153,18 @@ def test_a_crowded_node_between_two_densities_gives_up_its_short_edges():
     assert keep[6:12].all() and (~keep[:6]).sum() == 4
 
 
+def test_fixed_edges_count_at_a_crowded_node_but_stay():
+    """A dense zone's own lattice lines (`enclosed_zones`) are never left out, but a node where the
+    sparser zone's lines meet them counts them: the others go until it has eight."""
+    segments = _fan(12, np.r_[np.full(6, 1.2), np.full(6, 3.0)])
+    fixed = np.zeros(len(segments), bool)
+    fixed[:6] = True  # the short spokes, which would go first
+    keep = uncrowded_edges(segments, fixed=fixed)
+    assert keep[:6].all() and (~keep[6:12]).sum() == 4 and keep[12:].all()
+    keep = uncrowded_edges(segments, shortest=2.0, fixed=fixed)  # nor are they too short
+    assert keep[:6].all()
+
+
 def test_nodes_keep_their_edges_when_no_node_is_crowded():
     segments = _fan(8)
     assert uncrowded_edges(segments).all()

@@ -151,6 +151,9 @@ def matrix() -> dict[str, Case]:
         # a sparse region enclosed by denser infill: printed as its own lattice up to its border
         Case("sparse_region_enclosed", [plate_model(), modifier_box("box_enclosed.stl", 36.0, 36.0, 0.0, 0.0, 10.0)],
              {"infill_sparse_density": 40}),
+        # a dense region enclosed by sparser infill: its own lattice in whole triangles
+        Case("dense_region_enclosed", [plate_model(), modifier_box("box_dense.stl", 30.0, 30.0, 0.0, 0.0, 60.0)],
+             {"infill_sparse_density": 20}),
         Case("density_10", [hbracket_model()], {"infill_sparse_density": 10}),
         Case("density_50", [hbracket_model()], {"infill_sparse_density": 50}),
     ]

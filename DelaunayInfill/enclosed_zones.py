@@ -27,6 +27,7 @@ from scipy.spatial import cKDTree
 from shapely.ops import unary_union
 
 from .geometry import contains_xy, polygons_from, polygons_of, to_multipolygon
+from .metering import ZoneMeter
 from .routing import clip_segments
 from .sampling import LATTICE_AREA, LATTICE_SPACING, lattice_basis, lattice_frame, lattice_points
 
@@ -209,16 +210,21 @@ class LatticePatch:
     def _outline_tree(self):
         return cKDTree(self.outline)
 
-    def along(self, segments: np.ndarray) -> np.ndarray:
-        """(k,) bool: which `segments` (k, 2, 2) mm join two of the outline's nodes with their middle inside
-        the patch or within half a side of it: chords along it, where its own lines are."""
+    @cached_property
+    def _core_meter(self):
+        return ZoneMeter([self.area.buffer(-1e-3 * self.side, 4)])
+
+    def over(self, segments: np.ndarray) -> np.ndarray:
+        """(k,) bool: which other lines (`segments` (k, 2, 2) mm) lie on the patch, where its own lines
+        are: those that run through it (a junction edge across one of its outline's corners), and chords
+        between two of its outline's nodes with their middle inside it or within half a side of it."""
         if not len(segments) or not len(self.outline):
             return np.zeros(len(segments), bool)
         gap = self._outline_tree.query(segments.reshape(-1, 2), distance_upper_bound=1e-6 * self.side)[0]
         on = np.isfinite(gap).reshape(-1, 2).all(axis=1)
         middle = segments[on].mean(axis=1)
         on[on] = contains_xy(self._near, middle[:, 0], middle[:, 1])
-        return on
+        return on | (self._core_meter.inside_all(segments)[0] > 1e-3 * self.side)
 
     def joins(self, zone, points: np.ndarray, radius: float) -> np.ndarray:
         """The outline's nodes (b, 2) mm nearest to points a sampling `radius` apart along `zone`'s outline
@@ -233,8 +239,9 @@ class LatticePatch:
         return chosen
 
 
-def lattice_patch(zone, side: float, seed: int) -> LatticePatch | None:
-    """A dense zone's own lattice, whole triangles: those with at least two corners in `zone`.
+def lattice_patch(zone, side: float, seed: int, room=None) -> LatticePatch | None:
+    """A dense zone's own lattice, whole triangles: those with at least two corners in `zone` and the
+    others in `room` (optional, a shapely geometry: where the patch may reach past the zone).
 
     The lattice is `sampling.lattice_points`'s.  A triangle with two corners in the zone reaches past its
     border by at most its height (0.87 `side`); cut at the border instead, the lines there would end in
@@ -260,7 +267,11 @@ def lattice_patch(zone, side: float, seed: int) -> LatticePatch | None:
     index = index.reshape(-1, 3)
     xy = nodes @ basis.T + origin
     inside = contains_xy(zone, xy[:, 0], xy[:, 1])
-    index = index[inside[index].sum(axis=1) >= 2]
+    if room is None:
+        allowed = np.ones(len(xy), bool)
+    else:
+        allowed = inside if room.is_empty else inside | contains_xy(room, xy[:, 0], xy[:, 1])
+    index = index[(inside[index].sum(axis=1) >= 2) & allowed[index].all(axis=1)]
     if not len(index):
         return None
     edges = np.unique(np.sort(np.concatenate((index[:, [0, 1]], index[:, [1, 2]], index[:, [2, 0]])), axis=1),

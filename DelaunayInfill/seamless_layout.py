@@ -253,7 +253,7 @@ def sampled(build: SeamlessBuild, factors: np.ndarray, iteration: int, between_s
     triangles, edges = _triangulate(points, growing, radius_fn, build.dmap, build.width, build.cut, len(border))
     extra = _hole_lattices(build, points, triangles, densities, sampled_at)
     if build.patches:
-        edges = edges[~_along_patches(points[edges], build)]
+        edges = edges[~_on_patches(points[edges], build)]
     segments = np.concatenate((points[edges], extra))
     inside = build.meter.inside_all(segments)
     measured = build.meter.densities_of(inside, build.width)
@@ -348,7 +348,7 @@ def finished(build: SeamlessBuild, best: Sampling) -> Sampling:
     if holes.any():  # refinement's triangles may span a hole again
         segments = segments[~_across(segments, build)]
         if build.patches:
-            segments = segments[~_along_patches(segments, build)]
+            segments = segments[~_on_patches(segments, build)]
     # (the enclosed zones' lines count at their nodes but stay: they are those zones' lattices)
     keep = uncrowded(np.concatenate((segments, extra)), build.dmap, width,
                      fixed=np.arange(len(segments) + len(extra)) >= len(segments))[:len(segments)]
@@ -409,12 +409,22 @@ def _sample(area, radius_fn, seed: int, sampler: str, relax: int, growing: bool,
 def _enclosed(dmap: DensityMap, zone_areas: tuple, area, radii: np.ndarray, settled: np.ndarray, width: float,
               seed: int) -> tuple[np.ndarray, dict]:
     """The zones sampled round as holes (`SeamlessBuild.surround`) and the dense ones' lattice patches
-    (`SeamlessBuild.patches`)."""
+    (`SeamlessBuild.patches`).
+
+    A zone that a sparse zone is sampled round is sampled itself (no patch), and a patch reaches only
+    into the zone round it, clear of the other enclosed zones by as far as their own lines reach out
+    (a patch's height, a sparse zone's two radii, `hole_lines`): two of them never overlap."""
     surround = enclosed_zones(dmap, list(zone_areas), area, radii, settled, denser=False)
     dense = enclosed_zones(dmap, list(zone_areas), area, radii, settled, denser=True)
+    dense[np.isin(np.arange(len(dense)), surround[surround >= 0])] = -1
+    sides = {k: LATTICE_SIDE * width / float(dmap.densities[k]) for k in np.flatnonzero(dense >= 0).tolist()}
+    reach_out = {k: math.sqrt(3.0) / 2.0 * side for k, side in sides.items()}
+    reach_out.update({k: 2.0 * float(radii[surround[k]]) for k in np.flatnonzero(surround >= 0).tolist()})
     patches = {}
-    for k in np.flatnonzero(dense >= 0).tolist():
-        patch = lattice_patch(zone_areas[k], LATTICE_SIDE * width / float(dmap.densities[k]), seed)
+    for k, side in sides.items():
+        others = [zone_areas[j].buffer(reach, 4) for j, reach in reach_out.items() if j != k]
+        room = zone_areas[dense[k]].difference(unary_union(others)) if others else zone_areas[dense[k]]
+        patch = lattice_patch(zone_areas[k], side, seed, room)
         if patch is not None:
             patches[k] = patch
             surround[k] = dense[k]
@@ -430,11 +440,11 @@ def _on_hole_borders(build: SeamlessBuild, points: np.ndarray, sampled_at: np.nd
         for k in np.flatnonzero(build.holes)])
 
 
-def _along_patches(segments: np.ndarray, build: SeamlessBuild) -> np.ndarray:
-    """(k,) bool: segments (k, 2, 2) mm along a dense zone's patch (`LatticePatch.along`)."""
+def _on_patches(segments: np.ndarray, build: SeamlessBuild) -> np.ndarray:
+    """(k,) bool: segments (k, 2, 2) mm on a dense zone's patch (`LatticePatch.over`)."""
     out = np.zeros(len(segments), bool)
     for patch in build.patches.values():
-        out |= patch.along(segments)
+        out |= patch.over(segments)
     return out
 
 

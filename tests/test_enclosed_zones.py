@@ -8,6 +8,7 @@ from shapely.ops import unary_union
 from DelaunayInfill.density import LATTICE_SIDE, DensityMap, sampling_radius
 from DelaunayInfill.enclosed_zones import border_samples, enclosed_zones, hole_lines, lattice_edges, lattice_patch
 from DelaunayInfill.geometry import to_multipolygon
+from DelaunayInfill.metering import measured_density
 from DelaunayInfill.pattern import InfillPattern
 from DelaunayInfill.sampling import LATTICE_SPACING, lattice_frame, lattice_points
 from DelaunayInfill.triangulation import delaunay_triangles
@@ -93,6 +94,22 @@ def test_hole_lines_stay_out_of_the_denser_triangles_and_end_on_their_nodes():
     assert np.min(np.linalg.norm(ends[out][:, None] - nodes[None], axis=2), axis=1).max() < 1e-9
 
 
+def _crossings(lines: np.ndarray) -> int:
+    """How many pairs of segments (k, 2, 2) cross at a point inside both (not where they share an end)."""
+    a, d = lines[:, 0], lines[:, 1] - lines[:, 0]
+    count = 0
+    for lo in range(0, len(lines), 256):
+        p, r = a[lo:lo + 256, None], d[lo:lo + 256, None]
+        denom = r[..., 0] * d[None, :, 1] - r[..., 1] * d[None, :, 0]
+        qp = a[None] - p
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (qp[..., 0] * d[None, :, 1] - qp[..., 1] * d[None, :, 0]) / denom
+            u = (qp[..., 0] * r[..., 1] - qp[..., 1] * r[..., 0]) / denom
+        inner = (np.abs(denom) > 1e-12) & (t > 1e-6) & (t < 1 - 1e-6) & (u > 1e-6) & (u < 1 - 1e-6)
+        count += int(inner.sum())
+    return count // 2
+
+
 def _built_on_target(base, region, density, seed):
     """The pattern of PART at `base` with one region, clipped (k, 2, 2) mm; both zones measured whole
     within 1.5 points of their densities."""
@@ -143,15 +160,17 @@ def test_a_lattice_patch_is_the_lattice_triangles_with_two_corners_in_the_zone()
     assert on_boundary.sum() == len(patch.outline)
 
 
-def test_a_patch_s_chords_are_told_from_lines_leaving_it():
-    """Between two of the outline's nodes along the patch or across it: its own lines are there."""
+def test_lines_on_a_patch_are_told_from_lines_that_end_on_it():
+    """On the patch (its own lines are there): a chord between two of its outline's nodes along it or
+    across it, a line through it.  Not: a line from an outline node outwards, or ending on one."""
     zone = to_multipolygon(box(30, 30, 60, 60))
     patch = lattice_patch(zone, 3.0, 1)
+    centre = np.array([45.0, 45.0])
     a, b = patch.outline[0], patch.outline[np.argsort(np.linalg.norm(patch.outline - patch.outline[0], axis=1))[3]]
-    outward = a + 4.0 * (a - np.array([45.0, 45.0])) / np.linalg.norm(a - np.array([45.0, 45.0]))
+    outward = a + 4.0 * (a - centre) / np.linalg.norm(a - centre)
     far = patch.outline[np.argmax(np.linalg.norm(patch.outline - a, axis=1))]  # across the patch
-    segments = np.array([[a, b], [a, outward], [outward, a + 0.1], [a, far]])
-    assert patch.along(segments).tolist() == [True, False, False, True]
+    segments = np.array([[a, b], [a, far], [outward, 2 * centre - outward], [a, outward], [outward, a]])
+    assert patch.over(segments).tolist() == [True, True, True, False, False]
 
 
 def test_a_patch_joins_at_outline_nodes_a_radius_apart_clear_of_the_samples():
@@ -186,3 +205,32 @@ def test_a_dense_region_prints_its_density_as_its_own_lattice(seed):
     assert np.minimum(turn, np.pi / 3 - turn).max() < 1e-6
     reach = np.sqrt(3) / 2 * side + 1e-6
     assert region.buffer(reach).covers(MultiLineString([tuple(map(tuple, s)) for s in lines[meets]]))
+    assert _crossings(lines) == 0  # (a junction edge across a corner of the lattice: 2-3 before it went)
+
+
+@pytest.mark.parametrize("densities", [(0.6, 0.6), (0.6, 0.4)])
+def test_two_dense_regions_a_millimetre_apart_keep_their_lattices_to_themselves(densities):
+    """Each patch reaches only into the zone round it and keeps clear of the other by the other's reach:
+    without that the two lattices overlapped in the 1 mm between them (the same lattice twice at equal
+    densities: 6 segments printed twice; 9 and 10 pairs of crossing lines)."""
+    left, right = box(30, 30, 49.5, 70), box(50.5, 30, 70, 70)
+    pattern = InfillPattern.build(PART, 0.2, 0.4, regions=[(left, densities[0]), (right, densities[1])], seed=0)
+    lines = pattern.clip(PART).segments
+    keys = np.round(np.sort(lines, axis=1).reshape(-1, 4), 5)
+    assert len(np.unique(keys, axis=0)) == len(lines)
+    for zone, target in zip(pattern.density_map.zones(PART), pattern.density_map.densities, strict=True):
+        assert measured_density(lines, zone, 0.4) == pytest.approx(target, abs=0.015)
+    assert _crossings(lines) == 0
+
+
+def test_a_dense_zone_round_a_sparse_one_is_sampled_not_patched():
+    """A 10 % region inside a 60 % one inside a 20 % part: the 10 % zone is sampled round (its lines
+    join the 60 % zone's samples), so the 60 % zone is not a patch, though denser than all round it."""
+    from DelaunayInfill.seamless_layout import plan
+
+    part = to_multipolygon(box(0, 0, 100, 100))
+    dmap = DensityMap.create(0.2, [(box(20, 20, 80, 80), 0.6), (box(35, 35, 65, 65), 0.1)])
+    build = plan(part, dmap, 0.4, 0, "measured", 0, "lattice", part)
+    assert build.surround.tolist() == [-1, -1, 1] and not build.patches
+    dmap = DensityMap.create(0.2, [(box(20, 20, 80, 80), 0.6)])
+    assert list(plan(part, dmap, 0.4, 0, "measured", 0, "lattice", part).patches) == [1]

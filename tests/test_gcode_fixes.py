@@ -233,12 +233,12 @@ def test_feather_reaches_the_engine_and_the_pattern_cache_key(star):
     assert check.ok, check.problems
     # blended border: just outside the square the density rises above the base (20 %), just inside it
     # drops (sharp, the square is its own lattice up to its border and its last triangles reach past it:
-    # the ring outside prints above the base too, 26.9 % against 27.4 % blended)
+    # the ring inside prints 58.3 %, the ring outside above the base too, 25.2 % against 27.4 % blended)
     ring_out = square.buffer(2.5).difference(square)
     ring_in = square.difference(square.buffer(-2.5))
     sharp_out, soft_out = _density_in("".join(sharp), ring_out), _density_in("".join(soft), ring_out)
     sharp_in, soft_in = _density_in("".join(sharp), ring_in), _density_in("".join(soft), ring_in)
-    assert soft_out > 0.2 + 0.03 and soft_in < sharp_in - 0.03 and sharp_in > 0.6 - 0.02, \
+    assert soft_out > 0.2 + 0.03 and soft_in < sharp_in - 0.03 and sharp_in > 0.6 - 0.03, \
         (sharp_out, soft_out, sharp_in, soft_in)
     cache = PatternCache(ProcessSettings(feather=2.0))
     cache.get("m", square, 0.2, 0.4, [])

@@ -211,20 +211,23 @@ class LatticePatch:
         return cKDTree(self.outline)
 
     @cached_property
-    def _core_meter(self):
-        return ZoneMeter([self.area.buffer(-1e-3 * self.side, 4)])
+    def _meter(self):
+        # the patch shrunk and grown by a thousandth of a side: lines through it, lines along its outline
+        return ZoneMeter([self.area.buffer(-1e-3 * self.side, 4), self.area.buffer(1e-3 * self.side, 4)])
 
     def over(self, segments: np.ndarray) -> np.ndarray:
         """(k,) bool: which other lines (`segments` (k, 2, 2) mm) lie on the patch, where its own lines
-        are: those that run through it (a junction edge across one of its outline's corners), and chords
-        between two of its outline's nodes with their middle inside it or within half a side of it."""
+        are: those that run through it (a junction edge across one of its outline's corners) or along its
+        outline for a quarter side (one of its outline's edges printed twice), and chords between two of
+        its outline's nodes with their middle inside it or within half a side of it."""
         if not len(segments) or not len(self.outline):
             return np.zeros(len(segments), bool)
         gap = self._outline_tree.query(segments.reshape(-1, 2), distance_upper_bound=1e-6 * self.side)[0]
         on = np.isfinite(gap).reshape(-1, 2).all(axis=1)
         middle = segments[on].mean(axis=1)
         on[on] = contains_xy(self._near, middle[:, 0], middle[:, 1])
-        return on | (self._core_meter.inside_all(segments)[0] > 1e-3 * self.side)
+        through, along = self._meter.inside_all(segments)
+        return on | (through > 1e-3 * self.side) | (along > 0.25 * self.side)
 
     def joins(self, zone, points: np.ndarray, radius: float) -> np.ndarray:
         """The outline's nodes (b, 2) mm nearest to points a sampling `radius` apart along `zone`'s outline

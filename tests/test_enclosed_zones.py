@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from shapely.geometry import MultiLineString, Point, Polygon, box
+from shapely.geometry import LineString, MultiLineString, Point, Polygon, box
 from shapely.ops import unary_union
 
 from DelaunayInfill.density import LATTICE_SIDE, DensityMap, sampling_radius
@@ -162,7 +162,8 @@ def test_a_lattice_patch_is_the_lattice_triangles_with_two_corners_in_the_zone()
 
 def test_lines_on_a_patch_are_told_from_lines_that_end_on_it():
     """On the patch (its own lines are there): a chord between two of its outline's nodes along it or
-    across it, a line through it.  Not: a line from an outline node outwards, or ending on one."""
+    across it, a line through it or along its outline.  Not: a line from an outline node outwards, or
+    ending on one."""
     zone = to_multipolygon(box(30, 30, 60, 60))
     patch = lattice_patch(zone, 3.0, 1)
     centre = np.array([45.0, 45.0])
@@ -171,6 +172,10 @@ def test_lines_on_a_patch_are_told_from_lines_that_end_on_it():
     far = patch.outline[np.argmax(np.linalg.norm(patch.outline - a, axis=1))]  # across the patch
     segments = np.array([[a, b], [a, far], [outward, 2 * centre - outward], [a, outward], [outward, a]])
     assert patch.over(segments).tolist() == [True, True, True, False, False]
+    # a line from an outline node along one of the outline's edges and on outwards prints that edge twice
+    on_outline = [e for e in patch.lines if patch.area.boundary.distance(LineString(e).interpolate(0.5)) < 1e-9]
+    start, end = on_outline[0]
+    assert patch.over(np.array([[start, start + 3.0 * (end - start)]])).tolist() == [True]
 
 
 def test_a_patch_joins_at_outline_nodes_a_radius_apart_clear_of_the_samples():

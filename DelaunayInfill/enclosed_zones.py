@@ -29,7 +29,8 @@ from shapely.ops import unary_union
 from .geometry import contains_xy, polygons_from, polygons_of, to_multipolygon
 from .metering import ZoneMeter
 from .routing import clip_segments
-from .sampling import LATTICE_AREA, LATTICE_SPACING, lattice_basis, lattice_frame, lattice_points
+from .sampling import (LATTICE_AREA, LATTICE_SPACING, lattice_basis, lattice_coordinates, lattice_nodes_over,
+                       lattice_points, lattice_xy)
 
 __all__ = ["BORDER_GAP", "LatticePatch", "border_samples", "enclosed_zones", "hole_lines", "lattice_edges",
            "lattice_patch"]
@@ -183,9 +184,7 @@ def _joined(lines: np.ndarray, points: np.ndarray, side: float, seed: int,
         The lines, and which of their ends are cut ends that stayed where they were.
     """
     ends = lines.reshape(-1, 2).copy()
-    v1, v2 = lattice_basis(side, seed)
-    basis = np.stack((v1, v2), axis=1)
-    ij = np.linalg.solve(basis, (ends - basis @ lattice_frame(seed)[1]).T).T
+    ij = lattice_coordinates(ends, side, seed)
     on_node = (np.abs(ij - np.round(ij)) < 1e-6).all(axis=1)
     distance, nearest = cKDTree(points).query(ends, distance_upper_bound=reach)
     moved = np.isfinite(distance) & (~on_node | (distance <= 0.25 * LATTICE_SPACING * reach))
@@ -255,20 +254,13 @@ def lattice_patch(zone, side: float, seed: int, room=None) -> LatticePatch | Non
     LatticePatch or None
         None when no triangle has two corners in the zone.
     """
-    v1, v2 = lattice_basis(side, seed)
-    basis = np.stack((v1, v2), axis=1)
-    origin = basis @ lattice_frame(seed)[1]
-    x0, y0, x1, y1 = zone.buffer(side, 4).bounds
-    ij = np.linalg.solve(basis, (np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]]) - origin).T).T
-    lo, hi = np.floor(ij.min(axis=0)) - 1, np.ceil(ij.max(axis=0)) + 1
-    i, j = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
-    cell = np.stack((i.ravel(), j.ravel()), axis=1)
+    cell = lattice_nodes_over(zone.buffer(side, 4).bounds, side, seed)
     # each lattice cell (i, j) holds two triangles: (i, j) (i+1, j) (i, j+1) and (i+1, j) (i+1, j+1) (i, j+1)
     corners = np.concatenate((np.stack((cell, cell + [1, 0], cell + [0, 1]), axis=1),
                               np.stack((cell + [1, 0], cell + [1, 1], cell + [0, 1]), axis=1)))
     nodes, index = np.unique(corners.reshape(-1, 2), axis=0, return_inverse=True)
     index = index.reshape(-1, 3)
-    xy = nodes @ basis.T + origin
+    xy = lattice_xy(nodes, side, seed)
     inside = contains_xy(zone, xy[:, 0], xy[:, 1])
     if room is None:
         allowed = np.ones(len(xy), bool)

@@ -53,7 +53,8 @@ from scipy.spatial import cKDTree
 from .geometry import as_area, contains_xy
 
 __all__ = ["sample_poisson_disk", "uncovered_fraction", "radius_function", "hash_uniform", "lattice_points",
-           "sample_lattice", "LATTICE_SPACING", "LATTICE_AREA", "lattice_basis"]
+           "sample_lattice", "LATTICE_SPACING", "LATTICE_AREA", "lattice_basis", "lattice_coordinates",
+           "lattice_nodes_over", "lattice_xy"]
 
 RadiusLike = float | Callable[[np.ndarray], np.ndarray]
 
@@ -456,6 +457,35 @@ def lattice_basis(side: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
             side * np.array([math.cos(angle + math.pi / 3), math.sin(angle + math.pi / 3)]))
 
 
+def lattice_coordinates(points: np.ndarray, side: float, seed: int = 0) -> np.ndarray:
+    """Where `points` (k, 2) mm lie on a seed's lattice of the given side: (k, 2) multiples of its two
+    side vectors (`lattice_basis`) from its origin, whole numbers at its nodes."""
+    v1, v2 = lattice_basis(side, seed)
+    basis = np.stack((v1, v2), axis=1)  # columns
+    origin = basis @ lattice_frame(seed)[1]
+    return np.linalg.solve(basis, (np.asarray(points, dtype=float).reshape(-1, 2) - origin).T).T
+
+
+def lattice_nodes_over(bounds: tuple, side: float, seed: int = 0) -> np.ndarray:
+    """The lattice coordinates (m, 2) (whole numbers, `lattice_coordinates`) of every node of a seed's
+    lattice in a band of lattice cells round `bounds` (x0, y0, x1, y1) mm, at least one cell wider
+    than it on every side."""
+    x0, y0, x1, y1 = bounds
+    ij = lattice_coordinates(np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]]), side, seed)
+    lo, hi = np.floor(ij.min(axis=0)) - 1, np.ceil(ij.max(axis=0)) + 1
+    if (hi - lo).prod() > 2e7:
+        raise ValueError(f"lattice side {side:.4g} mm is too small for the region")
+    i, j = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
+    return np.stack((i.ravel(), j.ravel()), axis=1)
+
+
+def lattice_xy(nodes: np.ndarray, side: float, seed: int = 0) -> np.ndarray:
+    """The points (m, 2) mm of lattice coordinates `nodes` (m, 2) (`lattice_coordinates`)."""
+    v1, v2 = lattice_basis(side, seed)
+    origin = np.stack((v1, v2), axis=1) @ lattice_frame(seed)[1]
+    return origin + nodes[:, :1] * v1 + nodes[:, 1:] * v2
+
+
 def lattice_points(area, side: float, seed: int = 0) -> np.ndarray:
     """The points (n, 2) of a triangular lattice of the given side inside `area`.
 
@@ -463,18 +493,8 @@ def lattice_points(area, side: float, seed: int = 0) -> np.ndarray:
     and offset from `lattice_frame`, anchored at the origin): another area
     cuts the same lattice.
     """
-    v1, v2 = lattice_basis(side, seed)
-    basis = np.stack((v1, v2), axis=1)  # columns
-    offset = lattice_frame(seed)[1]
-    origin = basis @ offset
     x0, y0, x1, y1 = area.bounds
-    corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]]) - origin
-    ij = np.linalg.solve(basis, corners.T).T  # lattice coordinates of the box's corners
-    lo, hi = np.floor(ij.min(axis=0)) - 1, np.ceil(ij.max(axis=0)) + 1
-    if (hi - lo).prod() > 2e7:
-        raise ValueError(f"lattice side {side:.4g} mm is too small for the region")
-    i, j = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
-    pts = origin + i.reshape(-1, 1) * v1 + j.reshape(-1, 1) * v2
+    pts = lattice_xy(lattice_nodes_over(area.bounds, side, seed), side, seed)
     box_ok = (pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)
     pts = pts[box_ok]
     return pts[contains_xy(area, pts[:, 0], pts[:, 1])]

@@ -31,6 +31,7 @@ from .metering import ZoneMeter
 from .routing import clip_segments
 from .sampling import (LATTICE_AREA, LATTICE_SPACING, lattice_basis, lattice_coordinates, lattice_nodes_over,
                        lattice_points, lattice_xy)
+from .triangulation import unique_edges
 
 __all__ = ["BORDER_GAP", "LatticePatch", "border_samples", "enclosed_zones", "hole_lines", "lattice_edges",
            "lattice_patch"]
@@ -167,7 +168,24 @@ def hole_lines(zone, points: np.ndarray, triangles: np.ndarray, side: float, see
     lines, cut_ends = _joined(lines, points, side, seed, _SNAP * reach)
     length = np.hypot(*(lines[:, 1] - lines[:, 0]).T)
     # a piece cut at both ends that no node took (a corner of a triangle over the zone): a stub
-    return lines[(length > 1e-6) & ~(cut_ends.all(axis=1) & (length < 0.25 * side))]
+    keep = (length > 1e-6) & ~(cut_ends.all(axis=1) & (length < 0.25 * side))
+    # a piece whose ends both joined the nodes of one denser edge, or of another piece, is printed once
+    dense = points[unique_edges(triangles[near])] if covered is not None else np.zeros((0, 2, 2))
+    keep &= ~_repeats(lines, dense)
+    return lines[keep]
+
+
+def _repeats(lines: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """(k,) bool: which of `lines` (k, 2, 2) mm run between the same two points (to a micrometre) as one of
+    `others` (m, 2, 2) or as an earlier one of `lines`."""
+    both = np.concatenate((others, lines))
+    ends = np.round(both * 1e6).astype(np.int64).reshape(-1, 2, 2)
+    first = (ends[:, 0, 0] < ends[:, 1, 0]) | ((ends[:, 0, 0] == ends[:, 1, 0]) & (ends[:, 0, 1] <= ends[:, 1, 1]))
+    keys = np.where(first[:, None], ends.reshape(-1, 4), ends[:, ::-1].reshape(-1, 4))
+    _, index = np.unique(keys, axis=0, return_index=True)
+    once = np.zeros(len(both), bool)
+    once[index] = True  # (the first of each: the others come first)
+    return ~once[len(others):]
 
 
 def _joined(lines: np.ndarray, points: np.ndarray, side: float, seed: int,

@@ -223,7 +223,10 @@ def format_across(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
-STIFFNESS_PART = box(0, 0, 100, 100)
+# the region at the middle of a part wide enough that the window beside the largest (36 mm) region, its
+# edge on the border, lies inside the part (in a 100 mm part it reached 4 mm past the part's free edge)
+MIDDLE = 60.0  # mm
+STIFFNESS_PART = box(0, 0, 2 * MIDDLE, 2 * MIDDLE)
 STIFFNESS_CASES = {
     # name: (base density, region density, region side mm); the region is centred on the part
     "60 % region in 20 %": (0.2, 0.6, 30.0),
@@ -236,11 +239,11 @@ STIFFNESS_CASES = {
 
 def run_stiffness(seeds: int) -> list[dict]:
     """C_min / rho over the region and beside it, each against a uniform pattern of its density."""
-    centre = (50.0, 50.0)
+    centre = (MIDDLE, MIDDLE)
     rows = []
     for name, (base, inner, side) in STIFFNESS_CASES.items():
-        region = box(50 - side / 2, 50 - side / 2, 50 + side / 2, 50 + side / 2)
-        beside = (50.0, 50.0 - side)  # the window below the region, its top edge on the border
+        region = box(MIDDLE - side / 2, MIDDLE - side / 2, MIDDLE + side / 2, MIDDLE + side / 2)
+        beside = (MIDDLE, MIDDLE - side)  # the window below the region, its top edge on the border
         for seed in range(seeds):
             def uniform(d, seed=seed):
                 return InfillPattern.build(STIFFNESS_PART, d, WIDTH, seed=seed).clip(STIFFNESS_PART).segments
@@ -279,12 +282,12 @@ def ideal_junction(base: float, inner: float, side: float, angle: float) -> np.n
 
     from DelaunayInfill.geometry import contains_xy
 
-    region = box(50 - side / 2, 50 - side / 2, 50 + side / 2, 50 + side / 2)
+    region = box(MIDDLE - side / 2, MIDDLE - side / 2, MIDDLE + side / 2, MIDDLE + side / 2)
     points = []
     for density, inside in ((inner, True), (base, False)):
-        lattice = triangular_lattice(LATTICE_SIDE * WIDTH / density, 110.0, angle)
+        lattice = triangular_lattice(LATTICE_SIDE * WIDTH / density, 2.2 * MIDDLE, angle)
         nodes = np.unique(np.round(lattice.reshape(-1, 2), 7), axis=0)
-        nodes = nodes[(np.abs(nodes - 50.0) <= 50.0).all(axis=1)]
+        nodes = nodes[(np.abs(nodes - MIDDLE) <= MIDDLE).all(axis=1)]
         points.append(nodes[contains_xy(region, nodes[:, 0], nodes[:, 1]) == inside])
     points = np.unique(np.round(np.concatenate(points), 7), axis=0)
     tri = Delaunay(points).simplices
@@ -298,10 +301,10 @@ def run_ideal(angles=(0.1, 0.4, 0.7)) -> list[dict]:
     for name, (base, inner, side) in STIFFNESS_CASES.items():
         for angle in angles:
             lines = ideal_junction(base, inner, side, angle)
-            uniform = triangular_lattice(LATTICE_SIDE * WIDTH / inner, 110.0, angle)
-            over = stiffness(lines, WIDTH, window=side, centre=(50.0, 50.0))
+            uniform = triangular_lattice(LATTICE_SIDE * WIDTH / inner, 2.2 * MIDDLE, angle)
+            over = stiffness(lines, WIDTH, window=side, centre=(MIDDLE, MIDDLE))
             rows.append({"case": name, "seed": angle, "rho": over.rho, "region": over.c_min / stiffness(
-                uniform, WIDTH, window=side, centre=(50.0, 50.0)).c_min, "beside": float("nan")})
+                uniform, WIDTH, window=side, centre=(MIDDLE, MIDDLE)).c_min, "beside": float("nan")})
     return rows
 
 
@@ -340,8 +343,8 @@ def border_line_junction(base: float, inner: float, side: float, angle: float) -
     lattices' lines end on it), clipped to `STIFFNESS_PART`: segments (k, 2, 2), densities uncalibrated."""
     from shapely.ops import unary_union
 
-    region = box(50 - side / 2, 50 - side / 2, 50 + side / 2, 50 + side / 2)
-    lattice = {d: _lines(triangular_lattice(LATTICE_SIDE * WIDTH / d, 110.0, angle)) for d in (base, inner)}
+    region = box(MIDDLE - side / 2, MIDDLE - side / 2, MIDDLE + side / 2, MIDDLE + side / 2)
+    lattice = {d: _lines(triangular_lattice(LATTICE_SIDE * WIDTH / d, 2.2 * MIDDLE, angle)) for d in (base, inner)}
     return _segments(unary_union([lattice[inner].intersection(region),
                                   lattice[base].intersection(STIFFNESS_PART.difference(region)), region.exterior]))
 
@@ -351,12 +354,12 @@ def run_junctions(angles=(0.1, 0.4, 0.7)) -> list[dict]:
     in the windows over the region, beside it and straddling its border."""
     rows = []
     for name, (base, inner, side) in STIFFNESS_CASES.items():
-        region = box(50 - side / 2, 50 - side / 2, 50 + side / 2, 50 + side / 2)
-        below = box(50 - side / 2, 50 - 1.5 * side, 50 + side / 2, 50 - side / 2)
-        windows = {"over": (50.0, 50.0), "beside": (50.0, 50.0 - side), "straddling": (50.0, 50.0 - side / 2)}
+        region = box(MIDDLE - side / 2, MIDDLE - side / 2, MIDDLE + side / 2, MIDDLE + side / 2)
+        below = box(MIDDLE - side / 2, MIDDLE - 1.5 * side, MIDDLE + side / 2, MIDDLE - side / 2)
+        windows = {"over": (MIDDLE, MIDDLE), "beside": (MIDDLE, MIDDLE - side), "straddling": (MIDDLE, MIDDLE - side / 2)}
         for k, angle in enumerate(angles):
             def lattice(d, angle=angle):
-                lines = _lines(triangular_lattice(LATTICE_SIDE * WIDTH / d, 110.0, angle))
+                lines = _lines(triangular_lattice(LATTICE_SIDE * WIDTH / d, 2.2 * MIDDLE, angle))
                 return _segments(lines.intersection(STIFFNESS_PART))
 
             def pattern(d, seed=k):

@@ -76,6 +76,8 @@ CASES = {
     "box 20 mm at 60 % in 20 %": (PART, 0.2, [(box(30, 30, 50, 50), 0.6)]),
     "box 12 mm at 60 % in 20 %": (PART, 0.2, [(box(34, 34, 46, 46), 0.6)]),
     "disk 20 mm at 60 % in 20 %": (PART, 0.2, [(Point(40, 40).buffer(10, 32), 0.6)]),
+    "disk 12 mm at 60 % in 20 %": (PART, 0.2, [(Point(40, 40).buffer(6, 32), 0.6)]),
+    "box 16 mm at 40 % in 10 %": (PART, 0.1, [(box(32, 32, 48, 48), 0.4)]),
     "strip 8 mm at 60 % in 20 %": (PART, 0.2, [(box(36, 0, 44, 80), 0.6)]),
     "box 24 mm at 10 % in 40 %": (PART, 0.4, [(box(28, 28, 52, 52), 0.1)]),
     "strip 14 mm at 10 % in 40 %": (PART, 0.4, [(box(33, 0, 47, 80), 0.1)]),

@@ -53,7 +53,7 @@ _COARSE = 36.0  # several zones: a zone under this many squared radii is only ba
 # line widths: the denser zone's samples round an enclosed sparse zone lie this far outside it, so that
 # the ring of lines they make lies on the denser side (its bead touches the border from outside): the
 # zone is its lattice up to its border (40 seeds, `bench/bench_regions.py`: a 10 % zone in 40 % 0.940 ->
-# 0.963 of a uniform pattern's C_min / rho over it, a 24 mm one's worst density error 2.27 -> 1.39 points)
+# 0.962 of a uniform pattern's C_min / rho over it, a 24 mm one's worst density error 2.27 -> 1.38 points)
 RING_OUTSIDE = 0.5
 # a dense enclosed zone is its own lattice (a patch) only where it holds at least this many squared lattice
 # sides and the patch's lines print at most this far (a fraction) under its density: whole triangles leave
@@ -424,7 +424,7 @@ def _enclosed(dmap: DensityMap, zone_areas: tuple, area, radii: np.ndarray, sett
     A dense zone gets a patch where it holds at least `PATCH_AREA` squared lattice sides and the patch's
     own lines print at most `PATCH_SHORTFALL` under its density; else it is sampled with the zones round it
     (balancing brings a small zone to its density: a 12 mm disk at 60 % in 20 % printed 54.4-61.0 % as a
-    patch, 58.8-61.0 % sampled, 20 seeds).
+    patch, within 1.2 points sampled; `bench/bench_regions.py --seeds 40`).
 
     A zone that a sparse zone is sampled round is sampled itself (no patch), and a patch reaches only
     into the zone round it, clear of the other enclosed zones by as far as their own lines reach out

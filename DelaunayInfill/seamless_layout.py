@@ -126,6 +126,8 @@ class SeamlessBuild:
         The enclosed zones together (a dense one as its patch).
     patches : dict of int to LatticePatch
         The dense enclosed zones' own lattices (`enclosed_zones.lattice_patch`).
+    rings : dict of int to MultiPolygon
+        The sparse enclosed zones grown by `RING_OUTSIDE` line widths: their border samples lie on it.
     """
 
     area: object
@@ -149,6 +151,7 @@ class SeamlessBuild:
     zone_areas: tuple = ()
     cut: object = None
     patches: dict = dataclasses.field(default_factory=dict)
+    rings: dict = dataclasses.field(default_factory=dict)
 
     def radius_of(self, density):
         """Poisson-disk radius (mm) first taken for `density` (fraction or array of them)."""
@@ -228,7 +231,7 @@ def plan(area, dmap: DensityMap, width: float, seed: int, calibration: str, rela
     # A single zone is calibrated by scaling one sampling (continuous, cheap) as soon as
     # the scale needed is within reach; re-sampling only moves it by jumps of 1-2 points.
     single = calibration == "measured" and np.count_nonzero(settled) == 1
-    surround, zone_areas, cut, patches = None, (), None, {}
+    surround, zone_areas, cut, patches, rings = None, (), None, {}, {}
     if sampler == "lattice" and calibration == "measured" and several and not relax:
         zone_areas = tuple(dmap.zones(sampling_area))
         surround, patches = _enclosed(dmap, zone_areas, area, np.sqrt(radius_squared), settled, width, seed)
@@ -239,9 +242,11 @@ def plan(area, dmap: DensityMap, width: float, seed: int, calibration: str, rela
             clear = [patch.area.buffer(BORDER_GAP * math.sqrt(radius_squared[surround[k]]), 4)
                      for k, patch in patches.items()]
             sampling_area = to_multipolygon(sampling_area.difference(unary_union([cut, *clear])))
+            rings = {k: zone_areas[k].buffer(RING_OUTSIDE * width, 4)
+                     for k in np.flatnonzero(surround >= 0).tolist() if k not in patches}
     return SeamlessBuild(area, printed, dmap, width, seed, calibration, relax, sampler, meter, sampling_area,
                          targets, settled, small, coarse, bool(single), scale_limit(area, reach),
-                         not single and calibration == "measured", surround, zone_areas, cut, patches)
+                         not single and calibration == "measured", surround, zone_areas, cut, patches, rings)
 
 
 def sampled(build: SeamlessBuild, factors: np.ndarray, iteration: int, between_seed: int | None = None) -> Sampling:
@@ -456,8 +461,7 @@ def _on_hole_borders(build: SeamlessBuild, points: np.ndarray, sampled_at: np.nd
     return np.concatenate([np.zeros((0, 2))] + [
         build.patches[k].joins(build.zone_areas[k], points, float(build.radius_of(sampled_at[k])))
         if k in build.patches else
-        border_samples(build.zone_areas[k].buffer(RING_OUTSIDE * build.width, 4), points,
-                       float(build.radius_of(sampled_at[k])))
+        border_samples(build.rings[k], points, float(build.radius_of(sampled_at[k])))
         for k in np.flatnonzero(build.holes)])
 
 

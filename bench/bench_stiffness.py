@@ -19,10 +19,18 @@ the mean of the layers' tensors.  Columns:
 "Poisson sampler" is the default pattern before the lattice seeding (patterns
 built with ``sampler="fast"``), measured in the same run.
 
-The "9 windows" columns do the same over nine 30 mm windows (centres on a
-3 x 3 grid 10 mm apart round the box's centre; the mean tensor of the nine
-windows and five layers): where a pattern has few lines per window (10 %),
-how one window clips them moves the single-window figures by a few percent.
+The "9 windows" columns do the same over nine windows (centres on a 3 x 3
+grid 10 mm apart round the box's centre, closer where a large window would
+reach the walls; the mean tensor of the nine windows and five layers): where a
+pattern has few lines per window (10 %), how one window clips them moves the
+single-window figures by a few percent.  ``--window 60`` holds four lattice
+sides at 10 % (a 30 mm window two).
+
+"Cura triangles, window turned" measures Cura's triangles in windows turned
+by 0, 3, ..., 57 degrees round the centre (mean +- deviation over the turns;
+only where turned windows stay inside the infill): Cura anchors its lines at
+the box's centre, along the window's sides, while the default's lattice is
+turned by the seed, so this is the like-for-like reference at 10 %.
 
 Delaunay rows give the mean over the seeds, +- their standard deviation.
 With ``--plot PATH`` a polar plot of C(theta)/rho and E(theta)/rho at 20 %
@@ -37,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import os
 import re
 import statistics
@@ -55,6 +64,10 @@ CURA = ("triangles", "cubic", "grid")
 OURS = (("Delaunay default", {}), ("Poisson sampler (the default before the lattice)", {"sampler": "fast"}),
         ("relax=8", {"relax": 8}), ('layout="paper"', {"layout": "paper"}))
 WIDTH = 0.4
+TURNED = "Cura triangles, window turned 0-57°"
+TURNS = tuple(range(0, 60, 3))  # degrees: the triangles repeat every 60
+BOX = 80.0  # mm, the box's side
+INFILL_INSET = 0.8  # mm, the box's two walls: the infill's edge lies this far inside the box
 
 
 def split_like_cura(text: str) -> list[str]:
@@ -69,15 +82,30 @@ def middle_layers(path: str, count: int = 5) -> list[int]:
     return numbers[mid - count // 2: mid - count // 2 + count]
 
 
-def stack_of(path: str, layers: list[int], window: float, centre, spread: float = 10.0):
+def nine_window_spread(window: float) -> float:
+    """mm between the nine windows' centres: 10, or less where the outer windows would leave the infill."""
+    return min(10.0, (BOX - 2.0 * INFILL_INSET - window) / 2.0 - 0.5)
+
+
+def turned_fits(window: float, spread: float) -> bool:
+    """Whether the nine windows, turned by any angle round the box's centre, stay inside its infill."""
+    return math.sqrt(2.0) * (window / 2.0 + spread) <= BOX / 2.0 - INFILL_INSET
+
+
+def stack_of(path: str, layers: list[int], window: float, centre, spread: float = 10.0, turn: float = 0.0):
     """Stiffness of the stack of layers in the central window, and over 3 x 3 windows.
 
     Each is a `Stiffness` of the mean tensor and density: of the layers in the
     window at `centre`; and of the layers in nine windows whose centres are
     `centre` moved by -spread, 0, +spread mm in x and y (a larger piece of the
-    part: the clipping of a few lines by one window weighs less).
+    part: the clipping of a few lines by one window weighs less).  With `turn`
+    (degrees) the windows are turned by it round `centre` (the lines turned back).
     """
     segments = [fill_segments(path, n) for n in layers]
+    if turn:
+        angle = math.radians(-turn)
+        rotation = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+        segments = [(seg - centre) @ rotation.T + centre for seg in segments]
     central = [stiffness(seg, WIDTH, window=window, centre=centre) for seg in segments]
     offsets = [(dx, dy) for dx in (-spread, 0.0, spread) for dy in (-spread, 0.0, spread)]
     many = [stiffness(seg, WIDTH, window=window, centre=(centre[0] + dx, centre[1] + dy))
@@ -94,7 +122,7 @@ def run(densities, seeds: int, window: float, out: str):
     from DelaunayInfill.gcode.settings import ProcessSettings
 
     stl = os.path.join(out, "box.stl")
-    models.write_stl(stl, models.box(80.0, 80.0, 12.0), name="box")
+    models.write_stl(stl, models.box(BOX, BOX, 12.0), name="box")
     rows = {}  # (density, name) -> dict
     for density in densities:
         paths = {}
@@ -105,9 +133,14 @@ def run(densities, seeds: int, window: float, out: str):
             paths[pattern] = path
         layers = middle_layers(paths["grid"])
         centre = (110.0, 110.0)  # the box's centre: model (0, 0) is printed at the bed's centre
+        spread = nine_window_spread(window)
         for pattern in CURA:
-            stack, spread = stack_of(paths[pattern], layers, window, centre)
-            rows[(density, f"Cura {pattern}")] = {"stacks": [stack], "spread": [spread]}
+            stack, nine = stack_of(paths[pattern], layers, window, centre, spread)
+            rows[(density, f"Cura {pattern}")] = {"stacks": [stack], "spread": [nine]}
+        if turned_fits(window, spread):
+            # Cura anchors its lines at the box's centre, on the window's axes; the lattice is turned by the seed
+            turned = [stack_of(paths["triangles"], layers, window, centre, spread, turn) for turn in TURNS]
+            rows[(density, TURNED)] = {"stacks": [t[0] for t in turned], "spread": [t[1] for t in turned]}
         with open(paths["grid"], encoding="utf-8") as f:
             chunks = split_like_cura(f.read())
         for name, options in OURS:
@@ -125,9 +158,9 @@ def run(densities, seeds: int, window: float, out: str):
                 path = os.path.join(out, f"box_delaunay_{density:g}_{seed}.gcode")
                 with open(path, "w", encoding="utf-8") as f:
                     f.write("".join(layers_out))
-                stack, spread = stack_of(path, layers, window, centre)
+                stack, nine = stack_of(path, layers, window, centre, spread)
                 stacks.append(stack)
-                spreads.append(spread)
+                spreads.append(nine)
             rows[(density, name)] = {"stacks": stacks, "spread": spreads, "seconds": statistics.median(seconds)}
     return rows
 
@@ -162,16 +195,19 @@ def _cell(values, digits: int) -> str:
 
 def format_table(rows, densities, seeds: int, window: float) -> str:
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    out = [f"80 x 80 x 12 mm box, CuraEngine 4.13, 0.4 mm lines, {window:g} mm window at the centre, "
+    out = [f"80 x 80 x 12 mm box, CuraEngine 4.13, 0.4 mm lines, {window:g} mm window at the centre "
+           f"(9 windows {nine_window_spread(window):g} mm apart), "
            f"5 middle layers (stack = mean tensor), Delaunay rows: seeds 0-{seeds - 1}; load average {load:.2f}.", "",
            "| density | infill | C_min/rho | isotropy | E_min/rho | rho in window | vs Cura triangles (C_min/rho) "
            "| 9 windows: C_min/rho | isotropy | vs Cura triangles | process_gcode CPU (s) |",
            "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    names = [f"Cura {p}" for p in CURA] + [name for name, _ in OURS]
+    names = [f"Cura {p}" for p in CURA] + [TURNED] + [name for name, _ in OURS]
     for density in densities:
         reference = statistics.fmean(s.c_min for s in rows[(density, "Cura triangles")]["stacks"])
         reference_9 = statistics.fmean(s.c_min for s in rows[(density, "Cura triangles")]["spread"])
         for name in names:
+            if (density, name) not in rows:
+                continue
             row = rows[(density, name)]
             stacks, spread = row["stacks"], row["spread"]
             c_min, c_min_9 = [s.c_min for s in stacks], [s.c_min for s in spread]

@@ -21,7 +21,7 @@ import pytest
 from shapely.geometry import MultiLineString, box
 
 from DelaunayInfill.gcode import MeshSettings, ProcessSettings, Region, process_gcode
-from DelaunayInfill.gcode.process import PatternCache
+from DelaunayInfill.gcode.patterns import PatternCache
 from DelaunayInfill.gcode.read import as_cura_list
 from DelaunayInfill.gcode.verify import verify
 

@@ -18,12 +18,10 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from shapely.geometry import box as shapely_box
 
 from ..combing import CombingArea
 from ..geometry import (
     contains_xy,
-    covers,
     empty_area,
     multilinestring_of,
     polygons_of,
@@ -63,6 +61,7 @@ from .read import (
     iter_file_chunks,
     parse_layer,
 )
+from .patterns import PatternCache, RegionSoFar, shape_key
 from .replay import (
     LayerRecord,
     LayerWords,
@@ -99,6 +98,7 @@ __all__ = [
 
 _TIME_ELAPSED = re.compile(r"^;TIME_ELAPSED:(-?[\d.]+)", re.M)
 _M204 = re.compile(r"^M204 [^\n;]*?S(\d+\.?\d*)", re.M)
+_LAYER_NUMBER = re.compile(r";LAYER:(-?\d+)")
 _EXTRUDING_XY = re.compile(r"^G1 (?:F[\d.]+ )?X(-?[\d.]+) Y(-?[\d.]+) E", re.M)
 _DEFAULT_LINE_WIDTH = 0.4
 _RETRACT_TRAVEL_MM = 40.0  # a retraction and prime take about as long as this much travel
@@ -123,13 +123,19 @@ class Survey:
     # mesh -> [min x, min y, max x, max y] of its outer walls over the whole print, mm: where its
     # infill can ever be, so one pattern can serve all its layers (`PatternCache`)
     extents: dict = field(default_factory=dict)
+    # mesh -> the last ;LAYER: number it prints in (`RegionSoFar.layers_left`)
+    last_layers: dict = field(default_factory=dict)
 
     def add(self, text: str, index: int) -> None:
         if ";MESH:" in text:
             heads = _mesh_heads(text)
-            self.meshes.update(name for _, _, name in heads if name != "NONMESH")
+            names = {name for _, _, name in heads if name != "NONMESH"}
+            self.meshes.update(names)
             if ";TYPE:WALL-OUTER" in text:
                 self._add_extents(text, heads)
+            number = _LAYER_NUMBER.match(text)
+            if number:
+                self.last_layers.update(dict.fromkeys(names, int(number.group(1))))
         if index == 0:
             self.first_chunk = text
         self.last_chunk = text
@@ -181,160 +187,6 @@ def _mesh_heads(text: str) -> list[tuple[int, int, str]]:
         end = len(text) if end < 0 else end
         heads.append((start, end, text[start + 6 : end].rstrip()))
     return heads
-
-
-# ----------------------------------------------------------------------------- patterns
-def _build_pattern(footprint, density, line_width, regions, settings: ProcessSettings, infill_area=None):
-    from ..pattern import InfillPattern
-
-    return InfillPattern.build(
-        footprint,
-        density,
-        line_width,
-        regions=[(a, d) for a, d, _ in regions],
-        seed=settings.seed,
-        layout=settings.layout,
-        calibration=settings.calibration,
-        relax=settings.relax,
-        feather=settings.feather,
-        infill_area=infill_area,
-    )
-
-
-class PatternCache:
-    """Patterns per (mesh, density, line width), reused while they still fit.
-
-    A cached pattern is reused for a layer when its footprint covers the
-    layer's infill area and its density regions match the layer's: a region
-    matches when the symmetric difference is below 2 % of its area or half a
-    line width along its perimeter, whichever is larger.  Otherwise a new
-    pattern is built over the union of the old footprint and the new area, so
-    a part that stays the same or shrinks upwards uses one pattern for all its
-    layers (its infill stacks), and the pattern is calibrated on the area that
-    is really printed.
-    """
-
-    def __init__(self, settings: ProcessSettings, per_key: int = 6, extents: dict | None = None):
-        self.settings = settings
-        self.extents = extents or {}  # mesh -> its outer walls' [x0, y0, x1, y1] over the print, mm
-        self.per_key = per_key
-        self.entries: dict[tuple, list[tuple[object, list, object]]] = {}
-        self.builds = 0
-        self._covered: dict[int, object] = {}  # id(footprint) -> last area found inside it
-        self._same_memo: dict[tuple, bool] = {}
-
-    def _same(self, a, b, line_width: float) -> bool:
-        if a is b:
-            return True
-        fa, fb = _fingerprint(a), _fingerprint(b)
-        if fa == fb:  # the same polygon rebuilt: no boolean operation needed
-            return True
-        if abs(a.area - b.area) > 0.5 * max(a.area, b.area) + 1e-9:
-            return False
-        key = (fa, fb, round(line_width, 4))
-        hit = self._same_memo.get(key)
-        if hit is None:
-            tol = max(0.02 * max(a.area, b.area), 0.5 * line_width * max(a.length, b.length), 1e-6)
-            hit = a.symmetric_difference(b).area <= tol
-            if len(self._same_memo) >= 4096:
-                self._same_memo.clear()
-            self._same_memo[key] = hit
-        return hit
-
-    def _regions_match(self, cached: list, regions: list, line_width: float) -> bool:
-        return len(cached) == len(regions) and all(
-            abs(cd - d) < 1e-6 and self._same(ca, a, line_width)
-            for (ca, cd, _), (a, d, _) in zip(cached, regions, strict=True)
-        )
-
-    def get(self, mesh: str, area, density: float, line_width: float, regions: list):
-        """A pattern whose footprint covers `area`; returns (pattern, footprint, regions used)."""
-        key = (mesh, round(density, 4), round(line_width, 3), round(self.settings.feather, 3))
-        bucket = self.entries.setdefault(key, [])
-        grow_from = None
-        for i, (footprint, cached_regions, pattern) in enumerate(bucket):
-            if not self._regions_match(cached_regions, regions, line_width):
-                continue
-            if self._covered.get(id(footprint)) is area:  # the same area object fitted last time
-                bucket.insert(0, bucket.pop(i))
-                return pattern, footprint, cached_regions
-            # (the usual answer, inside, from a predicate; the overlay only for an area that leaves it)
-            if covers(footprint, area) or area.difference(footprint).area <= max(1e-6, 0.25 * line_width * area.length):
-                self._covered[id(footprint)] = area
-                bucket.insert(0, bucket.pop(i))
-                return pattern, footprint, cached_regions
-            if grow_from is None:
-                grow_from = footprint
-        footprint = area if grow_from is None else unary_union([grow_from, area])
-        # (the paper's pipeline plans nothing beyond the infill area: it decomposes that area itself)
-        extent = self.extents.get(mesh) if self.settings.layout != "paper" else None
-        grows = extent is not None and (grow_from is not None or _reaches_past(extent, area.bounds, _GROWTH_MM))
-        if grows:
-            # Where the mesh's infill can ever be, once its section is seen to grow upwards (a sphere's
-            # lower half, a cone on its tip, a flaring vase): the pattern is already there for the
-            # layers above, and their infill stacks.  (A prism, or a section that only shrinks, keeps
-            # the pattern of its own area.)
-            footprint = unary_union([footprint, shapely_box(*extent)])
-        footprint = to_multipolygon(footprint.buffer(line_width, 4))
-        # Calibrated where this layer prints (not over the rest of the footprint: a mesh's extent holds
-        # its holes and the places round it); a pattern for a section that grows, over its footprint:
-        # the layers above print it too, and a first section a few spacings wide would scale the
-        # lattice for its own few lines (a sphere's bottom cap: the whole sphere printed 16.8 % for 20 %)
-        printed = to_multipolygon(footprint.buffer(-line_width, 4)) if grows or grow_from is not None else area
-        pattern = _build_pattern(footprint, density, line_width, regions, self.settings, infill_area=printed)
-        self.builds += 1
-        bucket.insert(0, (footprint, regions, pattern))
-        del bucket[self.per_key :]
-        return pattern, footprint, regions
-
-
-# A mesh's extent reaching this far (mm) past a layer's infill area (walls and all) means its section
-# grows further up: more than any wall thickness or skin overlap.
-_GROWTH_MM = 4.0
-
-
-def _reaches_past(extent, bounds, margin: float) -> bool:
-    """Whether the rectangle `extent` (x0, y0, x1, y1) reaches more than `margin` past `bounds`."""
-    x0, y0, x1, y1 = bounds
-    return extent[0] < x0 - margin or extent[1] < y0 - margin or extent[2] > x1 + margin or extent[3] > y1 + margin
-
-
-_FINGERPRINTS: dict[int, tuple] = {}
-_SHAPE_KEYS: dict[int, tuple] = {}
-
-
-def _shape_key(area) -> tuple:
-    """(area rounded to 1e-6 mm², perimeter rounded to 1e-6 mm, bounds) of a polygon, a cache key.
-
-    Remembered per object (by id, checked against the object kept alongside): the
-    cached areas come back layer after layer, and shapely's properties cost more than the lookup.
-    """
-    hit = _SHAPE_KEYS.get(id(area))
-    if hit is not None and hit[0] is area:
-        return hit[1]
-    key = (round(area.area, 6), round(area.length, 6), area.bounds)
-    if len(_SHAPE_KEYS) >= 256:
-        _SHAPE_KEYS.clear()
-    _SHAPE_KEYS[id(area)] = (area, key)
-    return key
-
-
-def _fingerprint(area) -> tuple:
-    """A cheap identity of a polygon: bounds, area, vertex count and a hash of its rounded coordinates.
-
-    Remembered per object (weakly: by id, checked against the object kept alongside).
-    """
-    hit = _FINGERPRINTS.get(id(area))
-    if hit is not None and hit[0] is area:
-        return hit[1]
-    coords = [np.asarray(ring.coords) for poly in polygons_of(area) for ring in (poly.exterior, *poly.interiors)]
-    flat = np.round(np.concatenate(coords), 3) if coords else np.zeros((0, 2))
-    digest = hashlib.blake2b(flat.tobytes(), digest_size=12).digest()
-    fp = (tuple(round(v, 3) for v in area.bounds) if not area.is_empty else (), round(area.area, 3), len(flat), digest)
-    if len(_FINGERPRINTS) >= 1024:
-        _FINGERPRINTS.clear()
-    _FINGERPRINTS[id(area)] = (area, fp)
-    return fp
 
 
 def _printed_kinds(parse: LayerParse) -> set[int]:
@@ -568,6 +420,7 @@ class _Run:
         self.retraction = RetractionModel()
         self.report = ProcessReport(volumetric=info.volumetric)
         self.patterns = PatternCache(settings, extents=survey.extents)
+        self.last_layers = survey.last_layers
         self.area_cache = AreaCache()
         self.meshes: dict[str, _MeshFacts] = {}  # by ;MESH: name
         self.first_lw: float | None = None  # the first line width learned from any mesh's walls
@@ -1250,7 +1103,8 @@ class _Run:
             paths, used_regions = [], []
         else:
             with clock("patterns"):
-                pattern, _, used_regions = self.patterns.get(st.name, area, density, lw, region_list)
+                pattern, _, used_regions = self.patterns.get(st.name, area, density, lw, region_list,
+                                                             self._so_far(st.name, density, parse.number))
                 # Lines run to the area's edge, as Cura's own do (CuraEngine 4.13 and 5.0 end them on the
                 # inner wall's edge grown by the infill overlap: the same infill length per area); the
                 # stubs a clip leaves across a narrow stroke or in a sharp tip are left out below.
@@ -1625,7 +1479,7 @@ class _Run:
         for st in meshes:
             h.update(st.name.encode() + b"|" + np.round(st.geo.fill, 3).tobytes() + b"|")
         h.update(np.array([lw, overlap]).tobytes())
-        key = (h.digest(), _shape_key(area))
+        key = (h.digest(), shape_key(area))
         hit = self.modifier_areas.get(key)
         if hit is not None:
             return hit
@@ -1639,7 +1493,7 @@ class _Run:
 
     def _clip(self, pattern, area, start, end=None):
         """`pattern.clip`, remembered: a prism's layers clip the same area from and to the same nozzle positions."""
-        key = (id(pattern), *_shape_key(area), *(None if at is None else (round(at[0], 2), round(at[1], 2))
+        key = (id(pattern), *shape_key(area), *(None if at is None else (round(at[0], 2), round(at[1], 2))
                                                  for at in (start, end)))
         hit = self.clips.get(key)
         if hit is None or hit[0] is not pattern:  # ids are reused once a pattern is freed
@@ -1693,7 +1547,7 @@ class _Run:
         over all of itself).  `disjoint`: the regions are disjoint parts of
         `area` (a modifier split's), each its own part.
         """
-        key = (*_shape_key(area), tuple(id(r) for r in regions), round(lw, 4), disjoint)
+        key = (*shape_key(area), tuple(id(r) for r in regions), round(lw, 4), disjoint)
         hit = self.zone_areas.get(key)
         if hit is not None and all(a is b for a, b in zip(hit[0], regions, strict=True)):
             return hit[1]
@@ -1759,6 +1613,14 @@ class _Run:
         for k, (_, dens, name) in enumerate(regions):
             self._tally(name, dens, float(lengths[k]) * lw, areas[k])
         self._tally(base_name, base_density, float(lengths[-1]) * lw, areas[-1])
+
+    def _so_far(self, mesh: str, density: float, number: int | None) -> RegionSoFar | None:
+        """What the region of a mesh's own `density` has printed so far, and the mesh's layers above `number`."""
+        last = self.last_layers.get(mesh)
+        if number is None or last is None:
+            return None
+        t = self.tally.get(self._base_name(mesh, density))
+        return RegionSoFar(t.length, t.area, last - number) if t is not None else RegionSoFar(0.0, 0.0, last - number)
 
     def _base_name(self, mesh: str, density: float) -> str:
         """The report's name of a mesh's own `density`: "base", or "mesh NAME" when the mesh has a density

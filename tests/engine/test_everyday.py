@@ -22,7 +22,7 @@ import pytest
 from DelaunayInfill.curaengine import CuraEngineError
 
 from .engines import ENGINES
-from .everyday import CASES, DENSITIES, EverydaySlice, EverydaySliceCache, process_and_check, report_row
+from .everyday import CASES, DENSITIES, EverydayCase, EverydaySlice, EverydaySliceCache, process_and_check, report_row
 
 PARAMETERS = [
     pytest.param(case, density, version, id=f"{case.name}-{density}-{version}")
@@ -147,10 +147,16 @@ DENSITY_CASES = ("cone_up", "lobed_vase", "dome")
 DENSITY_TOLERANCE_POINTS = 1.5
 
 
-def printed_density(processed: str, reference: str, line_width: float) -> float:
+def printed_density(processed: str, reference: str, line_width: float, ends: str = "square") -> float:
     """The new infill's density over Cura's infill area, all layers together (a fraction): FILL length x
     line width over the area of the dense reference's lines (each buffered by half a line width), summed
-    over the layers that have both."""
+    over the layers that have both.
+
+    `ends` "flat": the reference lines' buffers end at the lines' ends, on the border of Cura's infill area
+    (square ends reach half a line width past it on both sides of a thin wall: a 2.4 mm wall's area
+    reads 17 % too large)."""
+    import shapely
+
     from .everyday_check import REFERENCE_MERGE_MM, extract_layers, lines_buffer
 
     ours, ref = extract_layers(processed), extract_layers(reference)
@@ -158,7 +164,10 @@ def printed_density(processed: str, reference: str, line_width: float) -> float:
     for key, layer in ours.items():
         if key in ref and len(ref[key].fill) and len(layer.fill):
             length += float(np.hypot(*(layer.fill[:, 1] - layer.fill[:, 0]).T).sum())
-            area += lines_buffer(ref[key].fill, line_width / 2 + REFERENCE_MERGE_MM).area
+            radius = line_width / 2 + REFERENCE_MERGE_MM
+            area += (lines_buffer(ref[key].fill, radius) if ends == "square" else shapely.buffer(
+                shapely.multilinestrings(shapely.linestrings(ref[key].fill)), radius, cap_style="flat",
+                join_style="mitre")).area
     return length * line_width / area
 
 
@@ -180,3 +189,34 @@ def test_growing_sections_print_their_density(everyday_slices, case, density, ve
     printed = 100 * printed_density("".join(layers), reference, sliced.line_width)
     print(f"\n[density] {case.name} {density} % CuraEngine {version}: {printed:.2f} %")
     assert abs(printed - density) <= DENSITY_TOLERANCE_POINTS, f"{case.name} printed {printed:.2f} % for {density} %"
+
+
+# Thin walls over a floor with Cura's default walls: the wall's infill area (a 2.4 mm ring in the cup, a
+# 3.4 mm one in the bushing's tube) comes back layer after layer inside the floor's (the flange's) area.
+THIN_WALL_CASES = [EverydayCase(f"{name}_default_walls", ((name, (0.0, 0.0)),), {}, what)
+                   for name, what in (("cup", "a cup's 4 mm wall over its 3 mm floor, Cura's default walls"),
+                                      ("bushing", "a bushing's tube over its flange, Cura's default walls"))]
+THIN_WALL_TOLERANCE_POINTS = 2.0  # issue 15 (before the refit: the cup at 20 % 2.4 and 2.1 points under, measured and reported)
+
+
+@pytest.mark.parametrize("case, density, version", [
+    pytest.param(case, density, version, id=f"{case.name}-{density}-{version}")
+    for version in ENGINES for case in THIN_WALL_CASES for density in DENSITIES])
+def test_thin_walls_over_a_floor_print_their_density(everyday_slices, case, density, version):
+    """The floor's pattern crosses the wall above it with whatever phase it has there (the cup printed
+    17.9 % for 20 % by the pass's report, the bushing 11.4 % for 10 % and 21.6 % for 20 %, CuraEngine
+    4.13, seed 0): after `REFIT_AFTER` layers the wall gets a pattern calibrated on it
+    (`PatternCache`). Measured over Cura's infill area, independently (the dense reference's lines with
+    flat ends; Cura's own grid measures 18.3 % in the cup at 20 %, 13.9 % in the bushing at 10 %), and as
+    reported; the checker passes."""
+    sliced = _slice(everyday_slices, case, density, version)
+    processed, report, result = process_and_check(sliced)
+    with open(sliced.reference_gcode, encoding="utf-8") as f:
+        reference = f.read()
+    printed = 100 * printed_density(processed, reference, sliced.line_width, ends="flat")
+    reported = 100 * report.regions[0].measured
+    print(f"\n[thin walls] {case.name} {density} % CuraEngine {version}: printed {printed:.2f} %, "
+          f"reported {reported:.2f} %")
+    assert result.ok, result.report()
+    assert abs(printed - density) <= THIN_WALL_TOLERANCE_POINTS, f"printed {printed:.2f} % for {density} %"
+    assert abs(reported - density) <= THIN_WALL_TOLERANCE_POINTS, f"reported {reported:.2f} % for {density} %"

@@ -8,6 +8,7 @@ layer gets one calibrated on it where the wider section's pattern prints it off 
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from dataclasses import dataclass
 
@@ -63,7 +64,6 @@ class PatternCache:
         self._covered: dict[int, object] = {}  # id(footprint) -> last area found inside it
         self._same_memo: dict[tuple, bool] = {}
         self._thin_runs: dict[tuple, _ThinRun] = {}  # per key: the thin area that came last, and how often
-        self._density_memo: dict[tuple, float] = {}  # (pattern, area, line width) -> its density there
         # ids of the patterns planned over a growing mesh's extent (an id a freed one leaves only spares a refit)
         self._planned_ahead: set[int] = set()
 
@@ -141,32 +141,26 @@ class PatternCache:
                    so_far: RegionSoFar | None) -> bool:
         """Whether `area` has been a thin area `REFIT_AFTER` times in a row and, printed with `pattern` for
         the mesh's layers left, would bring its region more than `REFIT_MISS` off `density` (once a run)."""
-        half_side = 0.5 * LATTICE_SIDE * line_width / density
-        # (no point of a set lies further from its edge than area / perimeter allows: most areas end here)
-        if area.area >= half_side * area.length or not area.buffer(-half_side, 2).is_empty:
-            self._thin_runs.pop(key, None)
-            return False
         if id(pattern) in self._planned_ahead:  # (a growing section's: its own layers above print it)
             return False
         run = self._thin_runs.get(key)
-        if run is not None and _nearly_same(run.area, area):
-            run = _ThinRun(area, run.layers + 1, run.refitted)
+        if run is not None and _nearly_same(run.area, area, line_width):
+            run = dataclasses.replace(run, area=area, layers=run.layers + 1)
         else:
-            run = _ThinRun(area, 1, False)
+            run = _ThinRun(area, 1)
+        if run.layers >= REFIT_AFTER and not run.refitted and run.thin is None:
+            run = dataclasses.replace(run, thin=_thin(area, 0.5 * LATTICE_SIDE * line_width / density))
         self._thin_runs[key] = run
-        if run.layers < REFIT_AFTER or run.refitted:
+        if run.layers < REFIT_AFTER or run.refitted or not run.thin:
             return False
-        memo_key = (id(pattern), _fingerprint(area), round(line_width, 4))
-        here = self._density_memo.get(memo_key)
-        if here is None:
-            here = measured_density(pattern.segments, area, line_width)
-            if len(self._density_memo) >= 256:
-                self._density_memo.clear()
-            self._density_memo[memo_key] = here
+        if run.measured is None or run.measured[0] != id(pattern):  # (once a run: its areas are nearly the same)
+            run = dataclasses.replace(run, measured=(id(pattern), measured_density(pattern.segments, area, line_width)))
+            self._thin_runs[key] = run
+        here = run.measured[1]
         whole = here if so_far is None else so_far.projected(here, area.area)
         if abs(whole - density) <= REFIT_MISS:
             return False
-        self._thin_runs[key] = _ThinRun(area, run.layers, True)
+        self._thin_runs[key] = dataclasses.replace(run, refitted=True)
         return True
 
     def _refit(self, bucket: list, area, density: float, line_width: float):
@@ -180,12 +174,20 @@ class PatternCache:
         return pattern, footprint, []
 
 
-def _nearly_same(a, b) -> bool:
-    """Whether two areas differ by at most 2 % of the larger one (a wall that comes back, not a section
-    that grows or shrinks a little every layer)."""
-    if _fingerprint(a) == _fingerprint(b):
-        return True
-    return a.symmetric_difference(b).area <= 0.02 * max(a.area, b.area)
+def _nearly_same(a, b, tolerance: float) -> bool:
+    """Whether two areas are within 2 % of each other's size and their bounds within `tolerance` (mm): a wall
+    that comes back, not a section that grows or shrinks every layer (cheap: `shape_key`'s remembered figures)."""
+    size_a, _, bounds_a = shape_key(a)
+    size_b, _, bounds_b = shape_key(b)
+    return (abs(size_a - size_b) <= 0.02 * max(size_a, size_b)
+            and max(abs(u - v) for u, v in zip(bounds_a, bounds_b, strict=True)) <= tolerance)
+
+
+def _thin(area, depth: float) -> bool:
+    """Whether no point of `area` lies further than `depth` (mm) from its edge."""
+    # (no point of a set lies further from its edge than area / perimeter allows: most areas end here; an
+    # area rebuilt from the G-code has many short edges, which a deep inward buffer pays for: simplified first)
+    return area.area < depth * area.length and area.simplify(0.05 * depth).buffer(-0.95 * depth, 1).is_empty
 
 
 @dataclass(frozen=True)
@@ -209,7 +211,9 @@ class _ThinRun:
 
     area: object  # the last layer's area
     layers: int  # how many layers in a row
-    refitted: bool  # a pattern of its own was built for the run
+    refitted: bool = False  # a pattern of its own was built for the run
+    thin: bool | None = None  # whether the area is thin (found once the run is REFIT_AFTER layers long)
+    measured: tuple | None = None  # (id of a pattern, the density it prints on the run's area)
 
 
 # A thin area (no point more than half a lattice side from its edge) printed this many layers in a row with a

@@ -212,7 +212,7 @@ class _ThinRun:
     area: object  # the last layer's area
     layers: int  # how many layers in a row
     refitted: bool = False  # a pattern of its own was built for the run
-    thin: bool | None = None  # whether the area is thin (found once the run is REFIT_AFTER layers long)
+    thin: bool | None = None  # whether the area is thin (found once a run is REFIT_AFTER layers long)
     measured: tuple | None = None  # (id of a pattern, the density it prints on the run's area)
 
 
@@ -221,8 +221,10 @@ class _ThinRun:
 # the mesh, would bring the region more than REFIT_MISS (a fraction, issue 15's 2 points) off its density: that
 # pattern crosses it with whatever phase it has there (a cup's 2.4 mm wall over its floor at 20 %: 17.0 %,
 # the cup 17.9 %).  The new pattern does not stack on the one below for one layer: within the target the
-# wider pattern stays (the bushing's tube: 1.6 points over, stacked).
-REFIT_AFTER = 2
+# wider pattern stays (the bushing's tube: 1.6 points over, stacked).  From the wall's first processed layer:
+# the layers above that repeat one of its layers are written from it (`replay`), and with a later refit some
+# would copy the wider pattern's layer and some the new one's, and the wall would not stack.
+REFIT_AFTER = 1
 REFIT_MISS = 0.02
 
 

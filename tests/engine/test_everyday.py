@@ -205,7 +205,7 @@ THIN_WALL_TOLERANCE_POINTS = 2.0  # issue 15 (before the refit: the cup at 20 % 
 def test_thin_walls_over_a_floor_print_their_density(everyday_slices, case, density, version):
     """The floor's pattern crosses the wall above it with whatever phase it has there (the cup printed
     17.9 % for 20 % by the pass's report, the bushing 11.4 % for 10 % and 21.6 % for 20 %, CuraEngine
-    4.13, seed 0): after `REFIT_AFTER` layers the wall gets a pattern calibrated on it
+    4.13, seed 0): from its first layer (`REFIT_AFTER`) the wall gets a pattern calibrated on it
     (`PatternCache`). Measured over Cura's infill area, independently (the dense reference's lines with
     flat ends; Cura's own grid measures 18.3 % in the cup at 20 %, 13.9 % in the bushing at 10 %), and as
     reported; the checker passes."""

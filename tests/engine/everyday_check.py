@@ -596,19 +596,19 @@ def sample_segments(segments: np.ndarray, step: float) -> tuple[np.ndarray, np.n
     return points, (length / counts)[owner]
 
 
-def lines_buffer(segments: np.ndarray, radius: float) -> BaseGeometry:
+def lines_buffer(segments: np.ndarray, radius: float, ends: str = "square") -> BaseGeometry:
     """The union of the segments buffered by `radius` (mm): the area the extrusion covers.
 
     Square ends and mitred joins: the union of many dense lines then has a few
     straight edges instead of a scallop of round caps, which makes it several
     times cheaper to build, grow and test points against.  A square end lies
     at most (sqrt(2) - 1) * radius (0.08 mm for a 0.4 mm line) beyond a round one,
-    at its corners only.
+    at its corners only.  `ends` "flat": the buffers end at the segments' ends.
     """
     if len(segments) == 0:
         return Polygon()
     lines = shapely.multilinestrings(shapely.linestrings(segments))
-    area = shapely.buffer(lines, radius, cap_style="square", join_style="mitre")
+    area = shapely.buffer(lines, radius, cap_style=ends, join_style="mitre")
     # the line ends along a straight border are collinear vertices: drop them
     return area.simplify(radius / 50)
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,8 +65,8 @@ class PatternCache:
         self._covered: dict[int, object] = {}  # id(footprint) -> last area found inside it
         self._same_memo: dict[tuple, bool] = {}
         self._thin_runs: dict[tuple, _ThinRun] = {}  # per key: the thin area that came last, and how often
-        # ids of the patterns planned over a growing mesh's extent (an id a freed one leaves only spares a refit)
-        self._planned_ahead: set[int] = set()
+        # the patterns planned over a growing mesh's extent, by id (gone with the pattern: ids are reused)
+        self._planned_ahead: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
 
     def _same(self, a, b, line_width: float) -> bool:
         if a is b:
@@ -132,7 +133,7 @@ class PatternCache:
         pattern = _build_pattern(footprint, density, line_width, regions, self.settings, infill_area=printed)
         self.builds += 1
         if grows:
-            self._planned_ahead.add(id(pattern))
+            self._planned_ahead[id(pattern)] = pattern
         bucket.insert(0, (footprint, regions, pattern))
         del bucket[self.per_key :]
         return pattern, footprint, regions
@@ -141,7 +142,7 @@ class PatternCache:
                    so_far: RegionSoFar | None) -> bool:
         """Whether `area` has been a thin area `REFIT_AFTER` times in a row and, printed with `pattern` for
         the mesh's layers left, would bring its region more than `REFIT_MISS` off `density` (once a run)."""
-        if id(pattern) in self._planned_ahead:  # (a growing section's: its own layers above print it)
+        if self._planned_ahead.get(id(pattern)) is pattern:  # (a growing section's: its layers above print it)
             return False
         run = self._thin_runs.get(key)
         if run is not None and _nearly_same(run.area, area, line_width):
@@ -153,8 +154,8 @@ class PatternCache:
         self._thin_runs[key] = run
         if run.layers < REFIT_AFTER or run.refitted or not run.thin:
             return False
-        if run.measured is None or run.measured[0] != id(pattern):  # (once a run: its areas are nearly the same)
-            run = dataclasses.replace(run, measured=(id(pattern), measured_density(pattern.segments, area, line_width)))
+        if run.measured is None or run.measured[0] is not pattern:  # (once a run: its areas are nearly the same)
+            run = dataclasses.replace(run, measured=(pattern, measured_density(pattern.segments, area, line_width)))
             self._thin_runs[key] = run
         here = run.measured[1]
         whole = here if so_far is None else so_far.projected(here, area.area)
@@ -213,7 +214,7 @@ class _ThinRun:
     layers: int  # how many layers in a row
     refitted: bool = False  # a pattern of its own was built for the run
     thin: bool | None = None  # whether the area is thin (found once a run is REFIT_AFTER layers long)
-    measured: tuple | None = None  # (id of a pattern, the density it prints on the run's area)
+    measured: tuple | None = None  # (a pattern, the density it prints on the run's area)
 
 
 # A thin area (no point more than half a lattice side from its edge) printed this many layers in a row with a

@@ -130,13 +130,18 @@ class PatternCache:
         # the layers above print it too, and a first section a few spacings wide would scale the
         # lattice for its own few lines (a sphere's bottom cap: the whole sphere printed 16.8 % for 20 %)
         printed = to_multipolygon(footprint.buffer(-line_width, 4)) if grows or grow_from is not None else area
-        pattern = _build_pattern(footprint, density, line_width, regions, self.settings, infill_area=printed)
-        self.builds += 1
+        pattern = self._built(bucket, footprint, density, line_width, regions, printed)
         if grows:
             self._planned_ahead[id(pattern)] = pattern
+        return pattern, footprint, regions
+
+    def _built(self, bucket: list, footprint, density: float, line_width: float, regions: list, printed):
+        """A pattern over `footprint` calibrated where `printed`, first in `bucket`."""
+        pattern = _build_pattern(footprint, density, line_width, regions, self.settings, infill_area=printed)
+        self.builds += 1
         bucket.insert(0, (footprint, regions, pattern))
         del bucket[self.per_key :]
-        return pattern, footprint, regions
+        return pattern
 
     def _refit_due(self, key: tuple, area, density: float, line_width: float, pattern,
                    so_far: RegionSoFar | None) -> bool:
@@ -167,12 +172,8 @@ class PatternCache:
     def _refit(self, bucket: list, area, density: float, line_width: float):
         """A pattern calibrated on `area` alone, first in `bucket`; returns what `get` returns."""
         footprint = to_multipolygon(area.buffer(line_width, 4))
-        pattern = _build_pattern(footprint, density, line_width, [], self.settings, infill_area=area)
-        self.builds += 1
         self._covered[id(footprint)] = area
-        bucket.insert(0, (footprint, [], pattern))
-        del bucket[self.per_key :]
-        return pattern, footprint, []
+        return self._built(bucket, footprint, density, line_width, [], area), footprint, []
 
 
 def _nearly_same(a, b, tolerance: float) -> bool:
@@ -188,7 +189,8 @@ def _thin(area, depth: float) -> bool:
     """Whether no point of `area` lies further than `depth` (mm) from its edge."""
     # (no point of a set lies further from its edge than area / perimeter allows: most areas end here; an
     # area rebuilt from the G-code has many short edges, which a deep inward buffer pays for: simplified first)
-    return area.area < depth * area.length and area.simplify(0.05 * depth).buffer(-0.95 * depth, 1).is_empty
+    size, perimeter, _ = shape_key(area)  # (remembered: the run's test of sameness has just asked for them)
+    return size < depth * perimeter and area.simplify(0.05 * depth).buffer(-0.95 * depth, 1).is_empty
 
 
 @dataclass(frozen=True)

@@ -17,9 +17,10 @@ import math
 import re
 
 import numpy as np
+import pytest
 from shapely.geometry import LineString, MultiLineString, Point, Polygon, box
 
-from DelaunayInfill.gcode import ProcessSettings, process_gcode
+from DelaunayInfill.gcode import ProcessSettings, Region, process_gcode
 from DelaunayInfill.gcode.area import skin_region, wall_rings
 from DelaunayInfill.gcode.footer import read_footer
 from DelaunayInfill.gcode.infer import _quantile
@@ -318,6 +319,31 @@ def test_a_small_island_keeps_infill():
     new = _fill_segments("".join(out))
     for layer, segs in new.items():
         assert _length_inside(segs, pillar) > 1.0, f"layer {layer}: the pillar lost its infill"
+
+
+@pytest.mark.parametrize("seed", [2, 4, 5])
+def test_a_pocket_behind_a_neck_a_0_percent_region_leaves_keeps_its_infill(seed):
+    """Random regions 81 (CuraEngine 5.0): a 0 % region's border passes within 0.3 mm of another part of
+    itself, and the pocket beyond that neck has Cura's line.  Through the neck the pocket was part of the
+    rest, whose new lines within reach "took over" its line: on these seeds the pocket printed nothing."""
+    part = box(80, 80, 120, 120)
+    pocket = box(96.5, 99.0, 99.0, 101.5)
+    neck = box(98.9, 100.1, 100.2, 100.4)  # 0.3 mm wide, to the rest of the area at x > 100
+    empty = box(70, 70, 100, 130).difference(pocket).difference(neck)
+    features = [("WALL-OUTER", np.asarray(part.buffer(-LW / 2, join_style=2).exterior.coords)),
+                ("WALL-INNER", np.asarray(part.buffer(-1.5 * LW, join_style=2).exterior.coords))]
+    fill_area = part.buffer(-2 * LW + 0.04, join_style=2).difference(empty.buffer(LW / 2))
+    for angle in (45, 135):  # Cura's 10 % grid beside the region, and its line in the pocket
+        features += [("FILL", line) for line in _grid_lines(fill_area, 8.0, angle)]
+    features.append(("FILL", np.array([[97.0, 100.2], [98.6, 100.2]])))
+    out, report = process_gcode(as_cura_list(_gcode([features] * 2)), ProcessSettings(seed=seed),
+                                regions=[Region(0.0, polygon=empty)])
+    assert report.layers_processed == 2, report.format_table()
+    new = _fill_segments("".join(out))
+    assert sorted(new) == [0, 1]
+    for layer, segs in new.items():
+        assert _length_inside(segs, pocket) > 1.0, f"layer {layer}: the pocket lost its infill"
+        assert _length_inside(segs, empty.buffer(-LW)) < 0.05, f"layer {layer} prints in the 0 % region"
 
 
 def test_a_part_whose_walls_do_not_close_keeps_cura_infill_and_is_reported():

@@ -269,6 +269,12 @@ def _without_necks(area, line_width: float):
     return _grown_back(area, shrunk, r)
 
 
+def without_necks(area, line_width: float, cura4_opening: bool = False):
+    """`area` without the strips under a line width that join two of its parts (`_without_necks`),
+    or opened as CuraEngine 4.13 opens every infill area (`cura4_opening`, `_opened_as_cura4`)."""
+    return _opened_as_cura4(area, line_width) if cura4_opening else _without_necks(area, line_width)
+
+
 def skin_region(runs: list[np.ndarray], line_width: float):
     """The area skin covers: its lines grown by half a line width, the gaps between them closed.
 
@@ -565,7 +571,7 @@ def mesh_layer(
         area = area.difference(skin_region(runs_of(parse, skin_mask), line_width))
         area = _opened_as_cura4(area, line_width) if cura4_opening else _opened(area, line_width)
     elif not area.is_empty:
-        area = _opened_as_cura4(area, line_width) if cura4_opening else _without_necks(area, line_width)
+        area = without_necks(area, line_width, cura4_opening)
     pieces = polygons_of(area)
     kept = [p for p in pieces if p.area > line_width * line_width]
     if len(kept) < len(pieces):  # (slivers left between walls and skin go; else the area stays as it is)

@@ -13,8 +13,9 @@ regions), and each result is judged by
   on skin or walls, Cura's infill places covered, no island without infill;
 * the density of every region and of the rest, measured here from the files alone: the new FILL's
   length inside the region's section (``manifold3d``'s slice of the modifier, the later regions' cut
-  out) and Cura's infill area (the dense reference slice's lines), times the line width, over that
-  area, summed over the layers.  Cura's own FILL is measured the same way.
+  out) and Cura's infill area (the dense reference slice's lines, buffered by half a line width with
+  flat ends), times the line width, over that area, summed over the layers.  Cura's own FILL is
+  measured the same way.
 
     python3 -m tests.engine.random_regions --seeds 0-39 --out /tmp/random-regions [--engine 5.0]
     python3 -m tests.engine.random_regions --seeds 0,3,7,9 --out /tmp/random-regions --pictures
@@ -32,7 +33,7 @@ from manifold3d import Manifold
 
 from DelaunayInfill.density import LATTICE_SIDE
 
-from .everyday import MODELS, SEGMENTS, EverydayCase, EverydaySlice, block, cylinder, is_modifier, section
+from .everyday import MODELS, SEGMENTS, EverydayCase, EverydaySlice, block, cylinder, section
 from .random_shapes import _seeds, random_model, random_settings, sliced_or_none, summary
 
 #: densities a region is drawn with, %
@@ -207,7 +208,9 @@ def zone_densities(done: EverydaySlice, drawn: RegionsCase, processed: str) -> l
         if ref is None or not len(ref.fill) or not np.isfinite(layer.z):
             continue
         z = layer.z - heights.get(key, 0.2) / 2
-        area = lines_buffer(ref.fill, lw / 2 + 0.01)
+        # (flat ends: Cura's infill area ends where its lines do; square ends read half a line width more
+        # along every wall, 4 % of a small region's area: random regions 81, a 94 mm² region at 80 %)
+        area = lines_buffer(ref.fill, lw / 2 + 0.01, ends="flat")
         sections = [translate(section(s, round(z, 4)), *done.bed_offset) for s in solids]
         # a region is what the later ones (higher infill_mesh_order) leave of it; the rest is what none covers
         pieces = [sec.difference(unary_union(sections[k + 1:])) if k + 1 < len(sections) else sec

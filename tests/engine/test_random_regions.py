@@ -76,6 +76,18 @@ def test_overlapping_regions_leave_empty_what_curaengine_4_13_leaves_empty(regio
     assert result.ok and not problems, result.report() + "\n".join(problems)
 
 
+@pytest.mark.parametrize("how", ["plugin", "cli"])
+def test_a_pocket_a_0_percent_region_cuts_off_keeps_its_infill(region_slices, how):
+    """Random regions 81 on CuraEngine 5.0: a 0 % cylinder's border passes within 0.3 mm of a hole's wall,
+    and beyond that neck a 0.37 mm² pocket has 0.76 mm of Cura's line (layer 18).  The neck is cut now
+    (`area.without_necks` after the 0 % cut), so the pocket keeps it; through the neck the rest's new
+    lines "took it over".  Its 80 % cylinder must print its density too (78.5 % as the plugin)."""
+    drawn = random_regions_case(81)
+    sliced = region_slices.get(drawn.case, drawn.density, "5.0")
+    _, result, _, problems = process_and_judge(sliced, drawn, as_plugin=how == "plugin")
+    assert result.ok and not problems, result.report() + "\n".join(problems)
+
+
 @pytest.mark.parametrize("version", ["4.13"])  # (CuraEngine 5.0 fails an assertion in its combing on this model)
 def test_a_region_with_walls_under_another_is_replaced_once(region_slices, version):
     """Random regions 96: an 80 % cube with walls (Per Model Settings) and an 80 % wall-less cylinder over

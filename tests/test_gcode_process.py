@@ -471,22 +471,23 @@ def test_plan_runs_routes_each_blocks_run_once_and_plans_as_without_memory(monke
 
 def test_a_layers_density_lookups_answer_as_infill_density():
     """The per-layer memo of `infill_density` gives its answer with and without an area, families or not."""
-    from types import SimpleNamespace
-
+    from DelaunayInfill.gcode.footer import read_footer
     from DelaunayInfill.gcode.infer import infill_density
-    from DelaunayInfill.gcode.process import _Run
+    from DelaunayInfill.gcode.mesh_density import MeshDensities
 
     lw = 0.4
     grid = np.array([[[x, 0.0], [x, 20.0]] for x in np.arange(0.0, 20.0, 2.0)]
                     + [[[0.0, y], [20.0, y]] for y in np.arange(0.0, 20.0, 2.0)])
     rng = np.random.default_rng(7)
     tangle = rng.uniform(0, 20, (40, 2, 2))  # no families: only the area gives a density
-    run = SimpleNamespace(layer_densities={})
+    densities = MeshDensities(ProcessSettings(), read_footer(""), 0, facts=None)
     for fill in (grid, tangle, grid[:3]):
         for area in (None, 400.0, None, 250.0):
-            assert _Run._infill_density(run, fill, lw, area) == infill_density(fill, lw, area)
-    assert _Run._infill_density(run, tangle, lw, 400.0) is not None
-    assert len(run.layer_densities) == 3  # one look at each set of lines
+            assert densities.of_lines(fill, lw, area) == infill_density(fill, lw, area)
+    assert densities.of_lines(tangle, lw, 400.0) is not None
+    assert len(densities.layer_answers) == 3  # one look at each set of lines
+    densities.new_layer(1)
+    assert densities.layer_answers == {}
 
 
 def test_zones_later_regions_win_and_a_tiled_area_has_no_base_zone():

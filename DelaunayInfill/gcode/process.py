@@ -46,7 +46,7 @@ from .emit import EmitParams, emit_block
 from .estimate import move_seconds, move_times
 from .footer import read_footer
 from .header import patch_header
-from .infer import e_per_mm, family_spacings, infill_density, skin_line_width, wall_line_width
+from .infer import e_per_mm, family_spacings, skin_line_width, wall_line_width
 from .read import (
     FILL,
     WALL_INNER,
@@ -62,6 +62,7 @@ from .read import (
     iter_file_chunks,
     parse_layer,
 )
+from .mesh_density import MeshDensities
 from .patterns import PatternCache, RegionSoFar, shape_key
 from .replay import (
     LayerRecord,
@@ -268,21 +269,6 @@ def _split_empty_regions(regions: list) -> tuple[list, object, list]:
 _NOTHING_LEARNED = (*(None,) * 5, frozenset())
 # FILL extruding this much more per mm (against the walls) than before: infill combined over layers
 _COMBINED_RATIO = 1.6
-# A density read from the lines' spacing this much over what their length gives (in an area at least
-# this many spacings across, where lines cut short at the border hardly count) is not the density
-# (line patterns measure 0.86-1.09 on the everyday models; gradual infill's steps are denser in part
-# of the area, so it is not asked there)
-_SPACING_OVER_LENGTH = 1.2
-_WIDE_AREA_SPACINGS = 4.0
-# Cura patterns whose lines in one layer do not show their density as a spacing (lines in pairs whose
-# gap changes from layer to layer): the footer's density holds even where their spacing disagrees
-_PAIRED_LINE_PATTERNS = frozenset({"tetrahedral", "quarter_cubic", "cross", "cross_3d"})
-
-
-#: a part with too few lines for families takes the footer's density while its lines' length over its
-#: area, summed over the layers, lies within this factor of it (a 10 % cutting mesh in a 20 % print
-#: reads 11-12 %)
-_FEW_LINES_AGREE = 0.7
 
 
 @dataclass
@@ -432,8 +418,6 @@ class _Run:
         self.result_memo: dict[int, tuple] = {}
         self.modifier_areas: dict[tuple, object] = {}
         self.shares: dict[tuple, tuple] = {}
-        self.few_lines_density: dict[tuple, float] = {}
-        self.layer_densities: dict[tuple, tuple] = {}  # this layer's `infill_density` answers
         self.grown: dict[tuple, tuple] = {}
         self.inside_memo: dict[tuple, tuple] = {}
         self.witnessed_memo: dict[tuple, tuple] = {}
@@ -471,6 +455,7 @@ class _Run:
         if steps is None:
             steps = self._footer_count("gradual_infill_steps")
         self.gradual_steps = steps
+        self.densities = MeshDensities(settings, self.footer, steps, self._facts)
         # Cura's Infill Wall Line Count: its closed FILL loops are kept
         self.infill_walls = (settings.infill_wall_lines if settings.infill_wall_lines is not None
                              else self._footer_count("infill_wall_line_count"))
@@ -832,136 +817,9 @@ class _Run:
             h = self.info.layer_height or min(z, 0.2)
         return z - h / 2
 
-    def _density_of(self, mesh: str, fill: np.ndarray, lw: float, area, alone: bool = False) -> float:
-        ms = self.s.mesh(mesh)
-        if ms is not None and ms.density is not None:
-            return ms.density
-        if self.s.density is not None:
-            return self.s.density
-        facts = self._facts(mesh)
-        wanted, paired = self._footer_density(facts)
-        if paired:
-            return wanted
-        if wanted is not None:
-            spacings = family_spacings(fill, lw) if len(fill) >= 12 else None
-            # this layer's few lines counted first: the footer is taken while their sum agrees
-            counted = spacings is None and self._count_few_lines(
-                facts, fill, lw, wanted, area.area if area is not None and alone else None)
-            if self._lines_agree(facts, wanted, spacings, counted, lw):
-                return wanted
-        if len(fill) < 12 and facts.few_lines_chunk == self.chunks_seen and facts.density is None:
-            return facts.few_lines_mm * lw / facts.few_lines_area  # what its lines said so far, not one layer's few
-        d = facts.density
-        if d is None:
-            d = self._infill_density(fill, lw, area.area if area is not None else None, by_length=alone)
-            if d is None:
-                return 0.2
-            if len(fill) >= 12:
-                facts.density = d
-        elif len(fill) >= 12:
-            # Cura made this mesh's infill denser from here on (gradual infill's steps under a top
-            # surface): never print less than it does.
-            here = self._infill_density(fill, lw)
-            # (and their length says so too: paired lines read as a spacing print no denser)
-            here_whole = self._infill_density(fill, lw, area.area if area is not None else None, by_length=alone)
-            if (here is not None and here > 1.25 * d and here_whole is not None and here_whole > 1.25 * d
-                    and family_spacings(fill, lw) is not None):
-                d = facts.density = here
-        return d
-
-    def _footer_density(self, facts: _MeshFacts) -> tuple[float | None, bool]:
-        """Cura's ``infill_sparse_density`` from the file's settings footer (None: none), and whether it
-        holds whatever the lines say (a pattern whose lines pair up: their gaps tell no density)."""
-        extruder = facts.extruder or 0
-        wanted = self.footer.infill_density(extruder)
-        if wanted is None or wanted <= 0.0:
-            return None, False
-        return wanted, (self.s.infill_pattern or self.footer.infill_pattern(extruder)) in _PAIRED_LINE_PATTERNS
-
-    def _lines_agree(self, facts: _MeshFacts, wanted: float, spacings: list | None, counted: bool, lw: float) -> bool:
-        """Whether a mesh's lines agree with the footer's density `wanted`.
-
-        The footer holds the print's settings, not per-model ones: a mesh whose
-        lines form clear families at another density (more than a quarter off)
-        has a per-model density of its own, which its lines tell; so does a
-        part with too few lines for families (`counted`) whose lines' length
-        over its area, summed over such layers so far (`_count_few_lines`), is
-        off the footer's by more than a factor 1.4 (a 10 % cutting mesh in a
-        20 % print: Cura's lines there read 12 %).
-        """
-        if spacings is not None:
-            return abs(sum(lw / sp for sp in spacings) - wanted) <= 0.25 * wanted
-        if counted:
-            by_length = facts.few_lines_mm * lw / facts.few_lines_area
-            return _FEW_LINES_AGREE * wanted <= by_length <= wanted / _FEW_LINES_AGREE
-        return True
-
-    def _count_few_lines(self, facts: _MeshFacts, fill: np.ndarray, lw: float, wanted: float,
-                         area: float | None) -> bool:
-        """Add this layer's lines and area to the mesh's few-lines sums (once a chunk); False: not such a part.
-
-        Only parts over two line spacings square count (a small island's few clipped lines say little),
-        and not with gradual infill (its sparser steps are replaced at the full density: not a density of
-        its own).
-        """
-        if not len(fill) or not area or area < (4.0 * lw / wanted) ** 2 or self.gradual_steps:
-            return False
-        if facts.few_lines_chunk != self.chunks_seen:
-            facts.few_lines_chunk = self.chunks_seen
-            facts.few_lines_mm += float(np.hypot(*(fill[:, 1] - fill[:, 0]).T).sum())
-            facts.few_lines_area += area
-        return True
-
-    def _region_mesh_density(self, mesh: str, fill: np.ndarray, lw: float, area) -> float:
-        ms = self.s.mesh(mesh)
-        if ms is not None and ms.region_density is not None:
-            return ms.region_density
-        if ms is not None and ms.density is not None:
-            return ms.density
-        facts = self._facts(mesh)
-        d = facts.region_density
-        if d is None:
-            # Too few lines to trust for every layer: remembered for this layer's very lines only.
-            key = (mesh, lw, hashlib.blake2b(np.round(fill, 3).tobytes(), digest_size=12).digest(),
-                   None if area is None else round(area.area, 3))
-            d = self.few_lines_density.get(key)
-            if d is None:
-                d = self._infill_density(fill, lw, area.area if area is not None else None) or 0.2
-                if len(self.few_lines_density) >= 256:
-                    self.few_lines_density.clear()
-                self.few_lines_density[key] = d
-            if len(fill) >= 12:
-                facts.region_density = d
-        return d
-
-    def _infill_density(self, fill: np.ndarray, lw: float, area: float | None = None,
-                        by_length: bool = False) -> float | None:
-        """`infill_density`, remembered for the layer by the lines themselves.
-
-        A mesh's lines are asked up to four times in its layer (the closing reach, the modifier
-        split, the mesh's and the region's density).  With families found the area plays no part,
-        so one look at the lines answers every area; only the fallback (no families) uses it, and
-        `by_length` (the lines are all of `area`'s: no modifier takes part of it), where the spacing
-        reads far denser than the length.
-        """
-        key = (fill.dtype.str, fill.shape, fill.tobytes(), lw)
-        hit = self.layer_densities.get(key)
-        if hit is None:
-            hit = self.layer_densities[key] = (infill_density(fill, lw),)
-        if hit[0] is None and area:
-            return infill_density(fill, lw, area)
-        if (by_length and hit[0] is not None and area and not self.gradual_steps
-                and area >= (_WIDE_AREA_SPACINGS * lw / hit[0]) ** 2):
-            # Octet, quarter cubic and cross infill pair their lines up at varying gaps: the gaps
-            # read as a spacing print far denser than the lines' length over the area says they do
-            by_length = float(np.hypot(*(fill[:, 1] - fill[:, 0]).T).sum() * lw / area)
-            if hit[0] > _SPACING_OVER_LENGTH * by_length:
-                return by_length
-        return hit[0]
-
     def _layer(self, parse: LayerParse):
         """Cura's FILL of one parsed layer replaced: areas, density regions, patterns, routes, emit."""
-        self.layer_densities = {}
+        self.densities.new_layer(self.chunks_seen)
         clock = self.clock
         with clock("areas"):
             steps = self._mesh_steps(parse)
@@ -1043,7 +901,7 @@ class _Run:
             if guess is None:
                 # Cura's own density of this mesh sets how far apart its FILL lines are.
                 sel = parse.mesh_mask(name) & is_fill & (parse.moves["de"] > 0)
-                guess = self._infill_density(segments_of(parse.moves, sel), lw)
+                guess = self.densities.of_lines(segments_of(parse.moves, sel), lw)
                 if guess is not None:
                     facts.reach_density = guess  # only sets a closing radius: the first estimate will do
                 guess = guess or 0.2
@@ -1094,7 +952,7 @@ class _Run:
                 out.stats["layers_with_cura_infill_kept"] = 1
             return None
         # (Cura's lines of a mesh with modifiers cover only part of its area: their length says nothing)
-        density = self._density_of(st.name, g.fill, lw, area, alone=not children)
+        density = self.densities.mesh(st.name, g.fill, lw, area, alone=not children)
         if density <= 0.0:
             return None  # a 0 % mesh has no infill (Cura made none)
         fill = self._fill_area(g, area, zones, lw, [g.fill, *(c.geo.fill for c in children)])
@@ -1188,7 +1046,7 @@ class _Run:
                 rimmed.append((len(given) + len(rimmed), ca))
             if mine:
                 continue  # the caller gave this modifier's exact mesh as a Region: keep that one only
-            zones.regions.append((ca, self._region_mesh_density(c.name, c.geo.fill, c.line_width, ca),
+            zones.regions.append((ca, self.densities.region(c.name, c.geo.fill, c.line_width, ca),
                                   f"mesh {c.name}"))
         # (in CuraEngine's mesh order, as the given regions are: a later modifier takes from the earlier ones)
         zones.rimmed = [a for _, a in sorted(rimmed, key=lambda item: item[0])]
@@ -1363,7 +1221,7 @@ class _Run:
             fill = c.geo.fill
             if len(fill) == 0:
                 continue
-            spacing = lw / self._cura_density(c.name, fill, lw)
+            spacing = lw / self.densities.cura(c.name, fill, lw)
             if 2.5 * spacing >= reach:
                 fills.append(fill)
                 continue
@@ -1399,7 +1257,7 @@ class _Run:
             if found is None:
                 # no families of parallel lines (gyroid, concentric, ...): twice the spacing their length
                 # gives (their lines wander, and a line multiplier doubles the length)
-                d = self._infill_density(f, lw, g.area.area) if not g.area.is_empty else None
+                d = self.densities.of_lines(f, lw, g.area.area) if not g.area.is_empty else None
                 if d is None and not g.area.is_empty:
                     # too few lines to tell their pattern (gradual infill's sparsest steps print two or
                     # three): their length still tells how far apart they are
@@ -1459,16 +1317,6 @@ class _Run:
             self.grown[key] = hit
         return hit[1]
 
-    def _cura_density(self, mesh: str, fill: np.ndarray, lw: float) -> float:
-        """Cura's own density of a mesh (from its FILL spacing), remembered."""
-        facts = self._facts(mesh)
-        d = facts.cura_density
-        if d is None:
-            d = self._infill_density(fill, lw) or 0.2
-            if len(fill) >= 12:
-                facts.cura_density = d
-        return d
-
     def _modifier_areas(self, host: _MeshStep, children: list) -> list:
         """Areas of a host's infill-mesh modifiers in this layer (one split of the host's area).
 
@@ -1488,7 +1336,7 @@ class _Run:
         hit = self.modifier_areas.get(key)
         if hit is not None:
             return hit
-        spacings = [lw / self._cura_density(st.name, st.geo.fill, lw) for st in meshes]
+        spacings = [lw / self.densities.cura(st.name, st.geo.fill, lw) for st in meshes]
         end_inset = max(0.0, lw / 2 - overlap)
         parts = split_by_line_ends(area, [st.geo.fill for st in meshes], spacings, end_inset, step=max(lw, 0.25))[1:]
         if len(self.modifier_areas) > 64:

@@ -715,10 +715,10 @@ def carved_as_cura4(area, modifiers: list, line_width: float, lines: np.ndarray 
     if not owned:
         return CarvedArea(empty_area(), empty_area())
     pieces = to_multipolygon(unary_union(owned))
-    return CarvedArea(_valid(kept.intersection(pieces.buffer(line_width / 4 + _EPS, 4))), pieces)
+    return CarvedArea(valid_area(kept.intersection(pieces.buffer(line_width / 4 + _EPS, 4))), pieces)
 
 
-def _valid(shape):
+def valid_area(shape):
     """`shape` as a valid MultiPolygon: GEOS can hand back an overlay whose holes nest, which the next
     overlay fails on (random regions 50: "TopologyException: found non-noded intersection", a failed layer)."""
     shape = to_multipolygon(shape)
@@ -759,8 +759,8 @@ def cura4_infill_areas(area, modifiers: list, line_width: float) -> list:
             if share.is_empty:
                 continue
             shares.append(share)
-            owns[k] = _valid(own.difference(outline))
+            owns[k] = valid_area(own.difference(outline))
         parts = [_opened_as_cura4(to_multipolygon(s.buffer(-line_width / 2, join_style=2, mitre_limit=1.2)), line_width)
                  for s in shares]
-        owns.append(_valid(unary_union([p for p in parts if not p.is_empty])) if parts else empty_area())
+        owns.append(valid_area(unary_union([p for p in parts if not p.is_empty])) if parts else empty_area())
     return owns

@@ -1036,7 +1036,11 @@ class _Run:
         facts = self._facts(st.name)
         facts.modifiers = facts.modifiers | {c.name for c in children}
         modifiers = {*facts.modifiers, *map(_file_name, facts.modifiers)}
-        rimmed = [(k, a) for k, (a, _, name) in enumerate(given) if name in modifiers] if self.cura4 else []
+        # (a 0 % region prints no line to show it a modifier of the model, but carves as one: a later region
+        # over it is inset twice, random regions 163; a region with walls is no modifier's host, seed 30)
+        host_is_region = any(r.name and r.name in (st.name, _file_name(st.name)) for r in self.user_regions)
+        rimmed = [(k, a) for k, (a, d, name) in enumerate(given)
+                  if name in modifiers or (d <= 0 and not host_is_region)] if self.cura4 else []
         for c, ca in zip(children, parts, strict=True):
             if ca.is_empty:
                 continue

@@ -36,7 +36,7 @@ from ..geometry import (
     to_multipolygon,
     unary_union,
 )
-from .area import direction_peaks, sample_segments
+from .area import direction_peaks, sample_segments, valid_area
 
 __all__ = ["split_by_lines", "split_by_line_ends", "line_families", "between_lines", "span_pieces"]
 
@@ -807,7 +807,7 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
     # Strips of the host narrower than its line spacing left between modifiers are
     # estimation slivers, not a zone the host's density could fill: the nearest modifier takes each.
     width = 0.5 * spacings[0]
-    core = to_multipolygon(host.buffer(-width, 4).buffer(width, 4).intersection(host))
+    core = _opened(host, width)
     try:
         slivers = [p for p in polygons_of(host.difference(core) if not core.is_empty else host) if p.area > 1e-9]
     except Exception:  # noqa: BLE001 - GEOS can fail on nearly touching borders; the slivers then stay the host's
@@ -823,6 +823,16 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
         kept = [piece for piece, o in zip(slivers, owner.tolist(), strict=True) if o < 0]
         host = to_multipolygon(unary_union([core, *kept])) if kept else core
     return [host, *children]
+
+
+def _opened(area, width: float):
+    """`area` shrunk by `width` and grown back, inside `area` (mm): without the strips narrower than 2 x `width`.
+
+    GEOS can grow the shrunk area back into a polygon that crosses itself, and the overlay with `area` then
+    fails (random regions 176: "TopologyException: found non-noded intersection", a failed layer): it is
+    made valid first.
+    """
+    return to_multipolygon(valid_area(area.buffer(-width, 4).buffer(width, 4)).intersection(area))
 
 
 def _nearest_within(pieces: list, targets: list, limit: float) -> np.ndarray:

@@ -88,6 +88,19 @@ def test_a_pocket_a_0_percent_region_cuts_off_keeps_its_infill(region_slices, ho
     assert result.ok and not problems, result.report() + "\n".join(problems)
 
 
+@pytest.mark.parametrize(("seed", "how"), [(163, "plugin"), (163, "cli"), (176, "cli")])
+def test_a_region_over_a_0_percent_one_is_carved_as_curaengine_4_13_carves_it(region_slices, seed, how):
+    """Random regions 163 (CuraEngine 4.13): a 30 % cylinder over a 0 % one; 4.13 carves the 0 % mesh too
+    (it prints no line to show it a modifier), so the 30 % one's share of it is inset twice, and in a
+    crescent's tip the new infill put 4.7-9.5 % of nine layers' where Cura prints none.  Seed 176 (from
+    the G-code alone): GEOS grew the modifier split's shrunk host back into a polygon that crosses itself,
+    and a layer failed."""
+    drawn = random_regions_case(seed)
+    sliced = region_slices.get(drawn.case, drawn.density, "4.13")
+    _, result, _, problems = process_and_judge(sliced, drawn, as_plugin=how == "plugin")
+    assert result.ok and not problems, result.report() + "\n".join(problems)
+
+
 @pytest.mark.parametrize("version", ["4.13"])  # (CuraEngine 5.0 fails an assertion in its combing on this model)
 def test_a_region_with_walls_under_another_is_replaced_once(region_slices, version):
     """Random regions 96: an 80 % cube with walls (Per Model Settings) and an 80 % wall-less cylinder over

@@ -746,7 +746,7 @@ def test_the_split_s_opening_survives_a_buffer_that_crosses_itself():
     part raised a TopologyException and the layer failed, keeping Cura's infill."""
     from shapely import wkt
 
-    from DelaunayInfill.gcode.split import _opened
+    from DelaunayInfill.gcode.split import _opened_round
 
     part = wkt.loads(
         "POLYGON ((90.73126566520293 123.31, 101.49023323742836 123.31, "
@@ -789,7 +789,7 @@ def test_the_split_s_opening_survives_a_buffer_that_crosses_itself():
         "90.59635881611533 112.63492312534288, 90.59635881611533 112.23524967708235, "
         "90.3 112.23524967708235, 90.3 121.80938951054647, 90.73126566520293 123.31))")
     width = 2.4982711555959978
-    core = _opened(part, width)
+    core = _opened_round(part, width)
     assert core.is_valid and not core.is_empty
     assert core.difference(part).area < 1e-6  # inside the part
     assert 0.8 * part.area < core.area < part.area

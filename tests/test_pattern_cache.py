@@ -7,7 +7,7 @@ Densities are measured here by clipping with shapely (independent of the pattern
 from __future__ import annotations
 
 import numpy as np
-from shapely.geometry import MultiLineString, Point
+from shapely.geometry import MultiLineString, Point, Polygon, box
 
 from DelaunayInfill.gcode import ProcessSettings
 from DelaunayInfill.gcode.patterns import REFIT_AFTER, REFIT_MISS, PatternCache, RegionSoFar
@@ -73,3 +73,19 @@ def test_a_wide_or_changing_section_keeps_its_pattern():
     for _ in range(REFIT_AFTER + 3):
         cache.get("column", column, DENSITY, WIDTH, [])
     assert cache.builds == 1
+
+
+def test_a_growing_section_with_regions_is_calibrated_where_the_layer_prints():
+    """A mesh whose section grows upwards gets a pattern planned over its whole extent; with density regions
+    each zone is calibrated on the layer's own area, not over the extent: the sparse zone's lines keep their
+    distance from a dense region, and over a box of the extent that band is a small share of the zone, over a
+    thin part a large one (random regions 120: the rest printed 27.6 % for 30 %, Cura 29.5 %)."""
+    part = box(-12.0, -3.0, 12.0, 3.0).union(Polygon([(-12.0, 6.0), (-4.0, 6.0), (-12.0, 14.0)]))
+    region = Point(2.0, 0.0).buffer(5.0, 32).intersection(part)
+    rest = part.difference(region)
+    for seed in range(3):  # (calibrated over the extent: 35.4, 33.9, 34.2 % in the rest)
+        cache = PatternCache(ProcessSettings(seed=seed), extents={"part": (-20.0, -20.0, 20.0, 20.0)})
+        pattern, footprint, _ = cache.get("part", part, 0.3, WIDTH, [(region, 0.6, "region")])
+        assert footprint.contains(box(-19.0, -19.0, 19.0, 19.0))  # (planned for the layers above)
+        assert abs(_density(pattern, rest) - 0.3) < 0.01
+        assert abs(_density(pattern, region) - 0.6) < 0.015

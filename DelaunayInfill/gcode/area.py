@@ -244,8 +244,7 @@ def _mitred_grown(shape, radius: float, mitre_limit: float):
     """`shape` grown by `radius` with mitred joins, valid: GEOS can return a mitred buffer that crosses
     itself where two sharp corners' spikes meet, and an overlay with it then fails (random regions 35,
     CuraEngine 5.0: "TopologyException: found non-noded intersection", a failed layer)."""
-    grown = shape.buffer(radius, join_style=2, mitre_limit=mitre_limit)
-    return grown if grown.is_valid else grown.buffer(0)
+    return valid_area(shape.buffer(radius, join_style=2, mitre_limit=mitre_limit))
 
 
 def _without_necks(area, line_width: float):

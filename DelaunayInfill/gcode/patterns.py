@@ -128,8 +128,12 @@ class PatternCache:
         # Calibrated where this layer prints (not over the rest of the footprint: a mesh's extent holds
         # its holes and the places round it); a pattern for a section that grows, over its footprint:
         # the layers above print it too, and a first section a few spacings wide would scale the
-        # lattice for its own few lines (a sphere's bottom cap: the whole sphere printed 16.8 % for 20 %)
-        printed = to_multipolygon(footprint.buffer(-line_width, 4)) if grows or grow_from is not None else area
+        # lattice for its own few lines (a sphere's bottom cap: the whole sphere printed 16.8 % for 20 %).
+        # With density regions, on this layer's area all the same: a sparse zone's lines keep their distance
+        # from a dense one, a band that is a small share of the zone over the footprint and a large one in a
+        # thin part (random regions 120: the rest printed 27.6 % for 30 %, calibrated over the footprint).
+        planned = (grows or grow_from is not None) and not regions
+        printed = to_multipolygon(footprint.buffer(-line_width, 4)) if planned else area
         pattern = self._built(bucket, footprint, density, line_width, regions, printed)
         if grows:
             self._planned_ahead[id(pattern)] = pattern

@@ -454,7 +454,6 @@ class _Run:
         steps = settings.gradual_infill_steps
         if steps is None:
             steps = self._footer_count("gradual_infill_steps")
-        self.gradual_steps = steps
         self.densities = MeshDensities(settings, self.footer, steps, self._facts)
         # Cura's Infill Wall Line Count: its closed FILL loops are kept
         self.infill_walls = (settings.infill_wall_lines if settings.infill_wall_lines is not None
@@ -1486,7 +1485,7 @@ class _Run:
         if ms is not None and ms.density is not None:
             return f"mesh {mesh}"
         footer = self.footer.infill_density(self._facts(mesh).extruder or 0)
-        if self.s.density is None and footer is not None and density != footer and not self.gradual_steps:
+        if self.s.density is None and footer is not None and density != footer and not self.densities.gradual_steps:
             return f"mesh {mesh}"
         return "base"
 

@@ -807,7 +807,7 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
     # Strips of the host narrower than its line spacing left between modifiers are
     # estimation slivers, not a zone the host's density could fill: the nearest modifier takes each.
     width = 0.5 * spacings[0]
-    core = _opened(host, width)
+    core = _opened_round(host, width)
     try:
         slivers = [p for p in polygons_of(host.difference(core) if not core.is_empty else host) if p.area > 1e-9]
     except Exception:  # noqa: BLE001 - GEOS can fail on nearly touching borders; the slivers then stay the host's
@@ -825,7 +825,7 @@ def split_by_line_ends(area, fills: list[np.ndarray], spacings: list[float], end
     return [host, *children]
 
 
-def _opened(area, width: float):
+def _opened_round(area, width: float):
     """`area` shrunk by `width` and grown back, inside `area` (mm): without the strips narrower than 2 x `width`.
 
     GEOS can grow the shrunk area back into a polygon that crosses itself, and the overlay with `area` then

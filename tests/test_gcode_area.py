@@ -684,6 +684,22 @@ def test_a_modifier_inside_another_is_inset_twice_and_a_narrow_strip_of_it_is_no
     assert contains_xy(carved_as_cura4(area, [dense, denser], lw, line).area, np.array([7.5]), np.array([0.5]))[0]
 
 
+def test_cura_s_lines_do_not_join_two_meshes_islands():
+    """Cura's lines count as islands of its infill where the model of its carving has none, but as thin
+    strips: buffered by half a line width, a host's line ending at its own area's edge and a modifier's
+    line 0.1 mm beside it bridged the 0.2 mm between the two meshes' areas, and a small island of one
+    became part of the other's (random regions 148: a 0.88 mm² tip lost Cura's line, which the new lines
+    of the region beyond "took over")."""
+    from DelaunayInfill.gcode.area import carved_as_cura4
+
+    lw = 0.4
+    area = MultiPolygon([box(0, 0, 20, 10)])
+    lines = np.array([[[5.0, 5.0], [10.0, 5.0]], [[10.2, 5.1], [15.0, 5.1]]])
+    carved = carved_as_cura4(area, [box(10, -5, 30, 15)], lw, lines)
+    assert len(polygons_of(carved.pieces)) == 2
+    assert contains_xy(carved.pieces, np.array([10.0, 10.2]), np.array([5.0, 5.1])).all()  # (Cura's ends)
+
+
 def test_an_opening_survives_a_mitred_buffer_that_crosses_itself():
     """Random regions 35 (CuraEngine 5.0): GEOS grew this piece of an infill area's shrunk core back into
     a polygon that crosses itself near (106.2, 120.5), and the overlay with the area raised a

@@ -101,6 +101,17 @@ def test_a_region_over_a_0_percent_one_is_carved_as_curaengine_4_13_carves_it(re
     assert result.ok and not problems, result.report() + "\n".join(problems)
 
 
+def test_a_tip_beside_a_region_keeps_cura_s_line(region_slices):
+    """Random regions 148 (CuraEngine 4.13, as the plugin): a 0.88 mm² tip of the host beside a 30 % sphere,
+    where Cura prints a line.  Two of Cura's lines 0.1 mm apart, one of each mesh, taken half a line width
+    wide as islands of Cura's infill, joined the tip to the sphere's island, whose new lines "took over" the
+    tip's line: nothing printed there.  As strips a tenth of a line width wide they do not."""
+    drawn = random_regions_case(148)
+    sliced = region_slices.get(drawn.case, drawn.density, "4.13")
+    _, result, _, problems = process_and_judge(sliced, drawn, as_plugin=True)
+    assert result.ok and not problems, result.report() + "\n".join(problems)
+
+
 @pytest.mark.parametrize(("seed", "version"), [(120, "4.13"), (129, "5.0")])
 def test_the_rest_of_a_growing_part_with_regions_keeps_its_density(region_slices, seed, version):
     """Random regions 120: a 60 % sphere in a 30 % part whose section grows upwards.  The pattern is planned

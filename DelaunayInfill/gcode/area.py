@@ -710,19 +710,19 @@ def carved_as_cura4(area, modifiers: list, line_width: float, lines: np.ndarray 
     rim = unary_union(modifiers).intersection(area).difference(area.buffer(-line_width / 2, 4))
     kept = area.difference(rim) if not rim.is_empty else area
     owned = [own for own in cura4_infill_areas(area, modifiers, line_width) if not own.is_empty]
-    printed, strips = [], []
+    reach, islands = owned, owned
     if lines is not None and len(lines):  # (where Cura printed, its area is: the witness outranks the model)
         runs = list(lines)
-        printed = [_buffer_runs(runs, line_width / 2).intersection(area)]
+        reach = [*owned, _buffer_runs(runs, line_width / 2).intersection(area)]
         # As islands, thin strips: half a line width wide, a mesh's line ending at its own area's edge and
         # another mesh's line beside it bridged the gap between their areas and made one island of two
         # (random regions 148: a 0.88 mm² tip lost Cura's line to the new lines of the region beyond)
-        strips = [_buffer_runs(runs, 0.1 * line_width).intersection(area)]
-    if not owned and not printed:
+        islands = [*owned, _buffer_runs(runs, 0.1 * line_width).intersection(area)]
+    if not reach:
         return CarvedArea(empty_area(), empty_area())
-    reach = to_multipolygon(unary_union([*owned, *printed]))
-    pieces = to_multipolygon(unary_union([*owned, *strips]))
-    return CarvedArea(valid_area(kept.intersection(reach.buffer(line_width / 4 + _EPS, 4))), pieces)
+    pieces = to_multipolygon(unary_union(islands))
+    grown = to_multipolygon(unary_union(reach)).buffer(line_width / 4 + _EPS, 4)
+    return CarvedArea(valid_area(kept.intersection(grown)), pieces)
 
 
 def valid_area(shape):

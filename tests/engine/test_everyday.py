@@ -85,14 +85,16 @@ STACKING_CASES = ("cone_up", "dome", "lobed_vase", "bushing", "arch", "sphere", 
 BULK_MM = 1.5
 
 
-def stacking_shares(processed: str, reference: str, line_width: float) -> list[tuple[int, float]]:
+def stacking_shares(processed: str, reference: str, line_width: float,
+                    thin: bool = False) -> list[tuple[int, float]]:
     """Per pair of consecutive layers: the share of the upper layer's infill that lies on the lower one's.
 
     Only where both layers have infill, in the bulk of it, counts: points of the upper layer's new
     infill with Cura's infill area (the dense reference's lines, one line width apart) all round them
     within `BULK_MM` in both layers (at least 90 % of a full disk's reference samples), so the thin
     bands beside skin or walls, where pattern and Cura's own lines are clipped to stubs, are left out;
-    a point stacks when the lower layer's new infill passes within half a line width.  Returns (upper
+    `thin`: every point with a reference line within a line width in both layers (a thin wall's ring).
+    A point stacks when the lower layer's new infill passes within half a line width.  Returns (upper
     layer number, share) for pairs with at least 100 such points (0.2 mm apart).
     """
     from scipy.spatial import cKDTree
@@ -112,7 +114,10 @@ def stacking_shares(processed: str, reference: str, line_width: float) -> list[t
         full_disk = math.pi * BULK_MM**2 / (line_width * 0.1)  # reference samples 0.1 mm apart on lines lw apart
         for key in (lower, upper):
             near, _ = sample_segments(ref[key].fill, 0.1)
-            both &= cKDTree(near).query_ball_point(points, BULK_MM, return_length=True) >= 0.9 * full_disk
+            if thin:
+                both &= cKDTree(near).query(points, distance_upper_bound=line_width)[0] <= line_width
+            else:
+                both &= cKDTree(near).query_ball_point(points, BULK_MM, return_length=True) >= 0.9 * full_disk
         if both.sum() < 100:
             continue
         below, _ = sample_segments(ours[lower].fill, 0.05)
@@ -136,8 +141,8 @@ def test_infill_stacks_on_the_layer_below(everyday_slices, name):
     worst = min(shares, key=lambda s: s[1])
     print(f"\n[stacking] {name}: {len(shares)} pairs, worst {worst[1]:.3f} (layer {worst[0]}), "
           f"mean {np.mean([s for _, s in shares]):.3f}")
-    # A section that grows inside its extent (the arch closing over the gap between its legs) gets its
-    # pattern rebuilt once there: that pair stacks 0.948, every other pair of every case >= 0.97.
+    # (session 26: every pair of every case 1.000 but the lofted hull's, 0.962 at worst; the arch, whose
+    # pattern was once rebuilt where it closes over the gap between its legs, stacked 0.948 there)
     assert worst[1] >= 0.94, sorted(shares, key=lambda s: s[1])[:5]
     assert sum(s < 0.97 for _, s in shares) <= 1, sorted(shares, key=lambda s: s[1])[:5]
 
@@ -215,3 +220,22 @@ def test_thin_walls_over_a_floor_print_their_density(everyday_slices, case, dens
     assert result.ok, result.report()
     assert abs(printed - density) <= THIN_WALL_TOLERANCE_POINTS, f"printed {printed:.2f} % for {density} %"
     assert abs(reported - density) <= THIN_WALL_TOLERANCE_POINTS, f"reported {reported:.2f} % for {density} %"
+
+
+@pytest.mark.parametrize("case, density, version", [
+    pytest.param(case, density, version, id=f"{case.name}-{density}-{version}")
+    for version in ENGINES for case in THIN_WALL_CASES for density in DENSITIES])
+def test_thin_walls_stack_but_where_their_own_pattern_starts(everyday_slices, case, density, version):
+    """Every layer pair of the wall's ring stacks (issue 15: at least 0.95), but for the one where the wall
+    gets a pattern of its own (`PatternCache`'s refit: the cup at 20 %, CuraEngine 4.13, layer 11 stacks 0.31,
+    the density traded for it), at most one pair a case."""
+    sliced = _slice(everyday_slices, case, density, version)
+    processed, _, _ = process_and_check(sliced)
+    with open(sliced.reference_gcode, encoding="utf-8") as f:
+        reference = f.read()
+    shares = stacking_shares(processed, reference, sliced.line_width, thin=True)
+    assert len(shares) >= 20, shares
+    low = sorted((s for s in shares if s[1] < 0.95), key=lambda s: s[1])
+    print(f"\n[thin-wall stacking] {case.name} {density} % CuraEngine {version}: {len(shares)} pairs, "
+          f"under 0.95: {low}, the rest from {min(s for _, s in shares if s >= 0.95):.3f}")
+    assert len(low) <= 1, low

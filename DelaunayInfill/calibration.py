@@ -30,6 +30,7 @@ import math
 import numpy as np
 from scipy.spatial import QhullError, cKDTree
 
+from .geometry import cell_centres
 from .metering import RasterMeter, ZoneMeter, border_bands
 from .sampling import close_pairs, greedy_independent_set
 from .triangulation import canonical_triangles, delaunay_triangles, growing_delaunay
@@ -302,8 +303,7 @@ def _emptiest_point(meter: ZoneMeter | RasterMeter, k: int, points: np.ndarray, 
     grid point is in the zone."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     step = max(math.sqrt(float(meter.areas[k])) / per_side, math.sqrt(float(np.prod(hi - lo)) / most), 1e-3)
-    xs, ys = np.arange(lo[0] + step / 2, hi[0], step), np.arange(lo[1] + step / 2, hi[1], step)
-    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    grid = cell_centres((*lo, *hi), step)
     inside = grid[meter.contains(k, grid)] if len(grid) else grid
     if not len(inside):
         return None

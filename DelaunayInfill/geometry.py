@@ -35,6 +35,7 @@ __all__ = [
     "SHAPELY2",
     "as_area",
     "boxes_meet",
+    "cell_centres",
     "contains_xy",
     "covers_segments",
     "distances",
@@ -137,6 +138,14 @@ def to_multipolygon(geometry: BaseGeometry | None) -> MultiPolygon:
 def boxes_meet(a: tuple, b: tuple) -> bool:
     """Whether two bounding boxes (minx, miny, maxx, maxy) overlap or touch."""
     return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
+
+
+def cell_centres(bounds, step: float) -> np.ndarray:
+    """Centres of the square cells of side `step` (mm) that tile the rectangle `bounds` (x0, y0, x1, y1) from its
+    lower left corner, x fastest, shape (n, 2) mm; n = 0 where the rectangle is under half a step across."""
+    x0, y0, x1, y1 = bounds
+    gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
+    return np.column_stack((gx.ravel(), gy.ravel()))
 
 
 def empty_area() -> MultiPolygon:

@@ -50,7 +50,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import as_area, contains_xy
+from .geometry import as_area, cell_centres, contains_xy
 
 __all__ = ["sample_poisson_disk", "uncovered_fraction", "radius_function", "hash_uniform", "lattice_points",
            "sample_lattice", "LATTICE_SPACING", "LATTICE_AREA", "lattice_basis", "lattice_coordinates",
@@ -520,10 +520,8 @@ def _lattice_cores(area, radius_fn, r_lo: float, seed: int) -> tuple[np.ndarray,
     reaching : ndarray, shape (m,)
         The radii whose lattices reach a denser radius's border (mm), for `_apart`.
     """
-    x0, y0, x1, y1 = area.bounds
     step = r_lo
-    gx, gy = np.meshgrid(np.arange(x0 + 0.5 * step, x1, step), np.arange(y0 + 0.5 * step, y1, step))
-    probe = np.c_[gx.ravel(), gy.ravel()]
+    probe = cell_centres(area.bounds, step)
     if len(probe) == 0:
         return np.zeros((0, 2)), np.zeros(0)
     probe_radius = radius_fn(probe)
@@ -1062,9 +1060,7 @@ def uncovered_fraction(region, samples: np.ndarray, radius: RadiusLike, *, spaci
     radius_fn = radius_function(radius)
     r_lo, _ = _radius_range(area, radius_fn)
     h = spacing or r_lo / 10.0
-    x0, y0, x1, y1 = area.bounds
-    gx, gy = np.meshgrid(np.arange(x0 + h / 2, x1, h), np.arange(y0 + h / 2, y1, h))
-    grid = np.c_[gx.ravel(), gy.ravel()]
+    grid = cell_centres(area.bounds, h)
     grid = grid[contains_xy(area, grid[:, 0], grid[:, 1])]
     if len(grid) == 0:
         return 0.0

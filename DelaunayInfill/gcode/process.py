@@ -203,12 +203,12 @@ def _printed_kinds(parse: LayerParse) -> set[int]:
 def _walled_meshes(parse: LayerParse) -> set[str]:
     """The meshes that print an outer wall in this layer, by ``;MESH:`` name and by file name."""
     names = {parse.meshes[code // 64] for code in _printed_kinds(parse) if code % 64 == WALL_OUTER}
-    return names | {_file_name(name) for name in names}
+    return set().union(*map(_names_of, names))
 
 
-def _file_name(mesh: str) -> str:
-    """A ``;MESH:`` name without its folders (a Region made from the mesh may be named either way)."""
-    return mesh.replace("\\", "/").rsplit("/", 1)[-1]
+def _names_of(mesh: str) -> set[str]:
+    """A ``;MESH:`` name and that name without its folders: a Region made from the mesh may be named either way."""
+    return {mesh, mesh.replace("\\", "/").rsplit("/", 1)[-1]}
 
 
 def _has_both_walls(parse: LayerParse, mesh: str) -> bool:
@@ -1021,7 +1021,7 @@ class _Run:
         """
         # (a region that is another mesh with walls here is cut out of this one's area with its walls: its
         # density is that mesh's, and in this one's pattern it would only thin the infill round it)
-        others = _walled_meshes(parse) - {st.name, _file_name(st.name)}
+        others = _walled_meshes(parse) - _names_of(st.name)
         given = [(a, r.density, r.name or f"region {k + 1}") for k, r in enumerate(self.user_regions)
                  if not (r.name and r.name in others) for a in [r.at(self._slice_z(parse.z))] if not a.is_empty]
         # Without user regions here, the regions are the modifier split's parts: disjoint, inside the area.
@@ -1034,17 +1034,17 @@ class _Run:
         # host's modifiers in any layer so far, in order
         facts = self._facts(st.name)
         facts.modifiers = facts.modifiers | {c.name for c in children}
-        modifiers = {*facts.modifiers, *map(_file_name, facts.modifiers)}
+        modifiers = set().union(*map(_names_of, facts.modifiers))
         # (a 0 % region prints no line to show it a modifier of the model, but carves as one: a later region
         # over it is inset twice, random regions 163; a region with walls is no modifier's host, seed 30)
-        host_is_region = any(r.name and r.name in (st.name, _file_name(st.name)) for r in self.user_regions)
+        host_is_region = any(r.name and r.name in _names_of(st.name) for r in self.user_regions)
         rimmed = [(k, a) for k, (a, d, name) in enumerate(given)
                   if name in modifiers or (d <= 0 and not host_is_region)] if self.cura4 else []
         for c, ca in zip(children, parts, strict=True):
             if ca.is_empty:
                 continue
             zones.covered_children.add(c.name)
-            mine = any(name in (c.name, _file_name(c.name)) for _, _, name in given)
+            mine = any(name in _names_of(c.name) for _, _, name in given)
             if self.cura4 and not mine:
                 rimmed.append((len(given) + len(rimmed), ca))
             if mine:

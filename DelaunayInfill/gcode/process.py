@@ -105,6 +105,7 @@ _EXTRUDING_XY = re.compile(r"^G1 (?:F[\d.]+ )?X(-?[\d.]+) Y(-?[\d.]+) E", re.M)
 _DEFAULT_LINE_WIDTH = 0.4
 _RETRACT_TRAVEL_MM = 40.0  # a retraction and prime take about as long as this much travel
 _NEGLIGIBLE_AREA = 1e-9  # share of an area below which what is left of it is rounding, not a zone
+_NO_AREA_MM2 = 1e-9  # an infill area this small (mm²) is a sliver the cuts left, nothing to fill (`as_area` refuses it)
 # the report's counters that a repeated layer adds to again (`_Run._totals`)
 _COUNTED = ("layers_total", "layers_processed", "layers_kept", "infill_before_mm", "infill_after_mm",
             "infill_travel_mm", "infill_retractions", "blocks_replaced", "blocks_kept", "cura_infill_kept_mm",
@@ -957,7 +958,9 @@ class _Run:
         fill = self._fill_area(g, area, zones, lw, [g.fill, *(c.geo.fill for c in children)])
         area, region_list, empty = fill.area, fill.regions, fill.empty
         my_blocks, fill_blocks, start, end = _host_blocks(parse.blocks, {st.name, *(c.name for c in children)})
-        if area.is_empty:  # all of it is 0 %: Cura's lines there go, nothing replaces them
+        # (all of it 0 %: Cura's lines there go, nothing replaces them; or the cuts left a sliver without
+        # area, random regions 264: Cura's lines stay where no new line takes over)
+        if area.is_empty or not area.area > _NO_AREA_MM2:
             paths, used_regions = [], []
         else:
             with clock("patterns"):
@@ -973,8 +976,12 @@ class _Run:
                               base_name=self._base_name(st.name, density))
         reach = 2.5 * lw / min([density, *(d for _, d, _ in used_regions)])
         with clock("Cura's lines kept"):
-            not_kept = empty if not nesting.inner_parts else to_multipolygon(
-                unary_union([*nesting.inner_parts, *([empty] if empty is not None else [])]))
+            # (Cura's own lines that graze a 0 % region's border stay: its section of the region and ours
+            # differ by the slicing's tolerance, and a small island's line lay a third inside ours, random
+            # regions 276)
+            empty_core = None if empty is None else to_multipolygon(empty.buffer(-lw / 2, 4))
+            not_kept = empty_core if not nesting.inner_parts else to_multipolygon(
+                unary_union([*nesting.inner_parts, *([empty_core] if empty_core is not None else [])]))
             paths = self._with_cura_kept(st, children, area, paths, reach, not_kept, start, out, fill.infill_walls,
                                          fill.in_walls, end, nesting.lines_inside, fill.pieces)
         for part, zname in fill.empty_parts:
@@ -1012,6 +1019,11 @@ class _Run:
                     regions = [(a, d, name) for a, d, name in cut if not a.is_empty]
         return _FillArea(area, regions, empty, empty_parts, before_empty, infill_walls, in_walls, pieces)
 
+    def _infill_mesh(self, name: str) -> bool:
+        """Whether the settings name `name` a Cura infill mesh (the plugin's density regions)."""
+        ms = self.s.mesh(name)
+        return ms is not None and ms.region_density is not None
+
     def _layer_regions(self, parse: LayerParse, st: _MeshStep, children: list) -> _LayerRegions:
         """The density regions of a host in this layer: its modifiers' parts, then the user's at its slice height.
 
@@ -1036,10 +1048,15 @@ class _Run:
         facts.modifiers = facts.modifiers | {c.name for c in children}
         modifiers = set().union(*map(_names_of, facts.modifiers))
         # (a 0 % region prints no line to show it a modifier of the model, but carves as one: a later region
-        # over it is inset twice, random regions 163; a region with walls is no modifier's host, seed 30)
-        host_is_region = any(r.name and r.name in _names_of(st.name) for r in self.user_regions)
+        # over it is inset twice, random regions 163; so does a region the plugin knows as an infill mesh before
+        # it prints its first line, or if it never does, its share all slivers along the walls: random regions
+        # 267; a region with walls is no modifier's host, seed 30, but a wall-less one that fills a layer of
+        # its own, its model printing no FILL there, is the model's modifier still, and so are the others
+        # beside it: random regions 289)
+        walled_region = st.geo.has_walls and any(r.name and r.name in _names_of(st.name) for r in self.user_regions)
         rimmed = [(k, a) for k, (a, d, name) in enumerate(given)
-                  if name in modifiers or (d <= 0 and not host_is_region)] if self.cura4 else []
+                  if name in modifiers or (not walled_region and (d <= 0 or self._infill_mesh(name)))
+                  ] if self.cura4 else []
         for c, ca in zip(children, parts, strict=True):
             if ca.is_empty:
                 continue

@@ -376,6 +376,7 @@ def main(argv=None) -> int:
     parser.add_argument("--engine", default="4.13", help="CuraEngine version (default 4.13)")
     parser.add_argument("--out", required=True, help="folder for the slices")
     parser.add_argument("--cli-only", action="store_true", help="process as the command line does only")
+    parser.add_argument("--plugin-only", action="store_true", help="process as the plugin does only")
     parser.add_argument("--pictures", action="store_true",
                         help="draw one layer of each seed (Cura's and the plugin's) into OUT/random-regions.png and stop")
     args = parser.parse_args(argv)
@@ -389,7 +390,7 @@ def main(argv=None) -> int:
         done = sliced_or_none(cache, drawn.case, drawn.density, args.engine, unsliced, seed)
         if done is None:
             continue
-        for as_plugin in (False,) if args.cli_only else (False, True):
+        for as_plugin in (False,) if args.cli_only else (True,) if args.plugin_only else (False, True):
             report, result, zones, problems = process_and_judge(done, drawn, as_plugin)
             how = "plugin" if as_plugin else "cli"
             ok = result.ok and not problems

@@ -144,3 +144,31 @@ def test_a_region_with_walls_under_another_is_replaced_once(region_slices, versi
     regions = {r.name: r for r in report.regions}
     assert "region_96_1.stl" in regions and abs(regions["region_96_1.stl"].measured - 0.8) < 0.03, report.format_table()
     assert report.cura_infill_kept_mm < 0.01 * report.infill_after_mm, report.format_table()
+
+
+@pytest.mark.parametrize("seed", [267, 272, 289])
+def test_every_infill_mesh_carves_its_model_as_curaengine_4_13_does(region_slices, seed):
+    """CuraEngine 4.13 carves every wall-less infill mesh out of its model's infill area, insets its share
+    and leaves a rim between the meshes' areas; the pass counted a region as such a modifier only once it had
+    printed in the model's FILL.  Random regions 267 (as the plugin): a 60 % sphere whose share of the part is
+    only slivers along its walls prints no line in the whole print; its slivers got new lines, 1.2-1.8 mm in
+    layers 6 and 18 (1.5-2.1 % of their new infill), where Cura prints none.  272: a 10 % cube likewise in
+    layer 38 (1.2 %).  289: in layers 47-56 the model prints no FILL of its own, only its three regions, each
+    then a host of its own, and the rims between them got new lines (up to 4.7 % of a layer).  The plugin's
+    settings name every region an infill mesh: each carves, a wall-less one filling a layer of its own too."""
+    drawn = random_regions_case(seed)
+    sliced = region_slices.get(drawn.case, drawn.density, "4.13")
+    _, result, _, problems = process_and_judge(sliced, drawn, as_plugin=True)
+    assert result.ok and not problems, result.report() + "\n".join(problems)
+
+
+def test_a_host_area_cut_to_a_sliver_keeps_cura_s_lines(region_slices):
+    """Random regions 264 (CuraEngine 4.13, from the G-code alone): in layer 60 the cuts round a 5 % cube with
+    walls and two cylinders left a host's infill area a sliver of 4e-17 mm², non-empty, and the pattern's clip
+    refused it ("infill area has no area"): the layer failed.  Nothing is printed there now, and Cura's lines
+    stay where no new line takes over."""
+    drawn = random_regions_case(264)
+    sliced = region_slices.get(drawn.case, drawn.density, "4.13")
+    report, result, _, problems = process_and_judge(sliced, drawn, as_plugin=False)
+    assert not report.failed_layers, report.failed_layers
+    assert result.ok and not problems, result.report() + "\n".join(problems)
